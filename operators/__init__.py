@@ -1,0 +1,1 @@
+"""Blender operators of the add-on (imported only by register())."""

@@ -1,0 +1,1 @@
+"""Blender panels of the add-on (imported only by register())."""
