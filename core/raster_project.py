@@ -1,0 +1,91 @@
+"""EWA projection of 3D Gaussians to screen-space conics (vectorised torch, autograd backward).
+
+The model (3DGS / gsplat): camera-frame mean ``t = W p + w``; Gaussians with ``t_z <= near`` are
+culled; 3D covariance ``R S S^T R^T`` (R from the normalised quaternion, S = exp(log_scales));
+2D covariance ``J W Sigma W^T J^T + 0.3 I`` (the 0.3 px^2 low-pass dilation), with the Jacobian
+evaluated at ``t`` whose x/z, y/z are clamped to 1.3x the field of view (as gsplat does); the
+conic is the inverse 2D covariance. A Gaussian touches pixel centre ``p`` only inside its 3 sigma
+ellipse (``power = 0.5 d^T conic d <= 4.5``, d = p - mean2d); ``extent`` holds the half sizes
+of the ellipse's axis-aligned bounding box, ``3 sqrt(cov2d_xx)``, ``3 sqrt(cov2d_yy)``.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import torch
+
+NEAR_PLANE = 0.01
+LOW_PASS = 0.3
+SIGMA_CUTOFF = 3.0
+POWER_CUTOFF = 0.5 * SIGMA_CUTOFF ** 2
+
+
+class Projected(NamedTuple):
+    """Per-Gaussian screen-space quantities (N rows each)."""
+
+    means2d: torch.Tensor   # (N,2) pixel coordinates
+    conics: torch.Tensor    # (N,3) inverse 2D covariance (a, b, c): [[a, b], [b, c]]
+    depths: torch.Tensor    # (N,) camera z
+    extent: torch.Tensor    # (N,2) half sizes of the 3 sigma box (no gradient)
+    visible: torch.Tensor   # (N,) bool: in front of the near plane and overlapping the image
+
+
+def quat_to_rotmat(quats: torch.Tensor) -> torch.Tensor:
+    """Quaternions (N,4) w x y z (any norm > 0) -> rotation matrices (N,3,3)."""
+    q = quats / quats.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    w, x, y, z = q.unbind(-1)
+    return torch.stack([
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ], dim=-1).reshape(-1, 3, 3)
+
+
+def as_tensor(a, like: torch.Tensor) -> torch.Tensor:
+    """``a`` (numpy or torch) as a tensor with ``like``'s dtype and device."""
+    if isinstance(a, torch.Tensor):
+        return a.to(dtype=like.dtype, device=like.device)
+    return torch.as_tensor(np.asarray(a), dtype=like.dtype, device=like.device)
+
+
+def project(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
+            K: torch.Tensor, w2c: torch.Tensor, width: int, height: int,
+            near: float = NEAR_PLANE) -> Projected:
+    """Project Gaussians with intrinsics ``K`` (3x3) and world-to-camera ``w2c`` (4x4, OpenCV)."""
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    Rw, tw = w2c[:3, :3], w2c[:3, 3]
+    t = means @ Rw.T + tw
+    z = t[:, 2]
+    in_front = z > near
+    z = torch.where(in_front, z, torch.ones_like(z))  # keeps culled rows finite (zero gradient)
+    x, y = t[:, 0], t[:, 1]
+
+    tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
+    lim_x_pos, lim_x_neg = (width - cx) / fx + 0.3 * tan_x, cx / fx + 0.3 * tan_x
+    lim_y_pos, lim_y_neg = (height - cy) / fy + 0.3 * tan_y, cy / fy + 0.3 * tan_y
+    tx = z * torch.minimum(torch.maximum(x / z, -lim_x_neg), lim_x_pos)
+    ty = z * torch.minimum(torch.maximum(y / z, -lim_y_neg), lim_y_pos)
+
+    zero = torch.zeros_like(z)
+    J = torch.stack([fx / z, zero, -fx * tx / (z * z),
+                     zero, fy / z, -fy * ty / (z * z)], dim=-1).reshape(-1, 2, 3)
+    M = quat_to_rotmat(quats) * torch.exp(log_scales)[:, None, :]   # R S
+    T = J @ Rw @ M                                                  # (N,2,3)
+    cov = T @ T.transpose(1, 2)
+    ca = cov[:, 0, 0] + LOW_PASS
+    cb = cov[:, 0, 1]
+    cc = cov[:, 1, 1] + LOW_PASS
+    det = ca * cc - cb * cb
+    ok = in_front & (det > 0)
+    det = torch.where(ok, det, torch.ones_like(det))
+    conics = torch.stack([cc / det, -cb / det, ca / det], dim=-1)
+    means2d = torch.stack([fx * x / z + cx, fy * y / z + cy], dim=-1)
+
+    with torch.no_grad():
+        extent = SIGMA_CUTOFF * torch.stack([ca, cc], dim=-1).clamp_min(0).sqrt()
+        lo, hi = means2d - extent, means2d + extent
+        on_screen = (hi[:, 0] > 0) & (lo[:, 0] < width) & (hi[:, 1] > 0) & (lo[:, 1] < height)
+        visible = ok & on_screen & torch.isfinite(means2d).all(-1) & torch.isfinite(extent).all(-1)
+    return Projected(means2d, conics, torch.where(in_front, t[:, 2], zero), extent, visible)
