@@ -1,0 +1,25 @@
+"""GPU backend: gsplat's CUDA rasterizer behind the same interface (used only if CUDA + gsplat).
+
+gsplat implements the same 3DGS model with its own small differences (alpha clamp 0.999, every
+pixel of a touched tile evaluated instead of the 3 sigma ellipse); it cannot be tested on CPU.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from .sh import sh_degree
+
+
+def rasterize_gsplat(means, quats, log_scales, opacity_logits, sh, K, w2c, width, height,
+                     background, near):
+    """-> rgb (H,W,3) over ``background``, expected depth (H,W), alpha (H,W)."""
+    from gsplat import rasterization
+
+    colors, alphas, _ = rasterization(
+        means, quats, torch.exp(log_scales), torch.sigmoid(opacity_logits), sh,
+        w2c[None], K[None], int(width), int(height), near_plane=near,
+        sh_degree=sh_degree(sh.shape[1]), render_mode="RGB+ED")
+    alpha = alphas[0, ..., 0]
+    rgb = colors[0, ..., :3] + (1.0 - alpha)[..., None] * background
+    return rgb, colors[0, ..., 3], alpha
