@@ -1,0 +1,260 @@
+"""Rasterizer: numba CPU backend vs the pure-torch reference (values and gradients), edge cases,
+and an analytic check of the EWA projection."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from artgs.core.cameras import Camera, intrinsics, look_at
+from artgs.core.device import resolve_backend, resolve_device
+from artgs.core.errors import ArtgsError
+from artgs.core.gaussians import Gaussians
+from artgs.core.raster_project import quat_to_rotmat
+from artgs.core.rasterize import rasterize, render
+from artgs.core.sh import C0
+
+W, H = 32, 24
+K = intrinsics(30.0, 32.0, 15.5, 12.5)
+BG = [0.2, 0.4, 0.1]
+DT = torch.float64
+
+
+def random_scene(seed: int, n: int = 50, degree: int = 1, dtype=DT) -> list[torch.Tensor]:
+    """n Gaussians 1.6..2.4 m in front of an identity camera, spread over the view."""
+    g = torch.Generator().manual_seed(seed)
+    u = torch.rand(n, 3, generator=g, dtype=dtype)
+    means = torch.stack([(u[:, 0] - 0.5) * 1.3, (u[:, 1] - 0.5) * 1.0, 1.6 + 0.8 * u[:, 2]], 1)
+    quats = torch.randn(n, 4, generator=g, dtype=dtype)
+    log_scales = torch.log(0.02 + 0.1 * torch.rand(n, 3, generator=g, dtype=dtype))
+    opacity_logits = 2.0 * torch.randn(n, generator=g, dtype=dtype)
+    sh = 0.4 * torch.randn(n, (degree + 1) ** 2, 3, generator=g, dtype=dtype)
+    return [means, quats, log_scales, opacity_logits, sh]
+
+
+def render_both(params, w2c=np.eye(4), width=W, height=H, k=K, weights_seed=0):
+    """Renders with both backends; returns {backend: (outputs, gradients of a random loss)}."""
+    gen = torch.Generator().manual_seed(weights_seed)
+    wc = torch.rand(height, width, 3, generator=gen, dtype=DT)
+    wd = torch.rand(height, width, generator=gen, dtype=DT)
+    wa = torch.rand(height, width, generator=gen, dtype=DT)
+    result = {}
+    for backend in ("reference", "cpu"):
+        ps = [p.detach().clone().requires_grad_(True) for p in params]
+        out = rasterize(*ps, k, w2c, width, height, background=BG, backend=backend)
+        loss = (out.rgb * wc).sum() + (out.depth * wd).sum() + (out.alpha * wa).sum()
+        grads = torch.autograd.grad(loss, ps, allow_unused=True)
+        result[backend] = (out, [torch.zeros_like(p) if gr is None else gr
+                                 for p, gr in zip(ps, grads)])
+    return result
+
+
+def rel_err(a: torch.Tensor, b: torch.Tensor) -> float:
+    """||a - b|| / ||b||; gradients below 1e-8 (losses here are O(1..100)) count as zero."""
+    return float((a - b).norm() / b.norm().clamp_min(1e-8))
+
+
+def assert_match(result, grad_tol=1e-3):
+    (ref, gref), (cpu, gcpu) = result["reference"], result["cpu"]
+    for name in ("rgb", "depth", "alpha"):
+        a, b = getattr(cpu, name), getattr(ref, name)
+        assert a.shape == b.shape and a.dtype == b.dtype
+        assert float((a - b).detach().abs().max()) < 1e-4, name
+    names = ("means", "quats", "log_scales", "opacity_logits", "sh")
+    for name, gc, gr in zip(names, gcpu, gref):
+        assert torch.isfinite(gc).all(), name
+        assert rel_err(gc, gr) < grad_tol, (name, rel_err(gc, gr))
+        # per Gaussian: each Gaussian's gradient matches relative to the largest ones
+        scale = gr.reshape(len(gr), -1).norm(dim=1).max().clamp_min(1e-8)
+        assert float((gc - gr).abs().max() / scale) < grad_tol, name
+
+
+@pytest.mark.parametrize("seed,degree", [(0, 0), (1, 1), (2, 2), (3, 3), (4, 3)])
+def test_matches_reference(seed, degree):
+    params = random_scene(seed, degree=degree)
+    result = render_both(params, weights_seed=seed)
+    ref = result["reference"][0]
+    assert float(ref.alpha.detach().max()) > 0.9 and float(ref.alpha.detach().min()) < 0.1  # a non-trivial scene
+    assert_match(result)
+
+
+def test_dense_scene_early_stop():
+    """Many overlapping opaque Gaussians: most pixels stop early, alphas clamp at 0.99."""
+    params = random_scene(7, n=120, degree=2)
+    params[2] = params[2] + 1.0          # larger
+    params[3] = params[3].abs() + 2.0    # opaque (some beyond the 0.99 clamp)
+    result = render_both(params, weights_seed=7)
+    alpha = result["reference"][0].alpha.detach()
+    assert float((alpha > 0.999).double().mean()) > 0.3
+    assert_match(result)
+
+
+def test_joint_transform_upstream():
+    """means = R(theta) x + t, quats rotated by R(theta): theta gets the reference gradient."""
+    params = random_scene(11, n=40, degree=1)
+    theta0 = torch.tensor([0.3, -0.2, 0.1], dtype=DT)
+    grads = {}
+    for backend in ("reference", "cpu"):
+        theta = theta0.clone().requires_grad_(True)
+        trans = torch.tensor([0.05, -0.02, 0.1], dtype=DT, requires_grad=True)
+        angle = theta.norm()
+        axis = theta / angle
+        Kx = torch.zeros(3, 3, dtype=DT)
+        Kx[0, 1], Kx[0, 2], Kx[1, 2] = -axis[2], axis[1], -axis[0]
+        Kx = Kx - Kx.T
+        R = torch.eye(3, dtype=DT) + torch.sin(angle) * Kx + (1 - torch.cos(angle)) * Kx @ Kx
+        centre = torch.tensor([0.0, 0.0, 2.0], dtype=DT)
+        means = (params[0] - centre) @ R.T + centre + trans
+        qr = torch.cat([torch.cos(angle / 2)[None], torch.sin(angle / 2) * axis])
+        w1, v1 = qr[0], qr[1:]
+        q = params[1] / params[1].norm(dim=1, keepdim=True)
+        w2, v2 = q[:, :1], q[:, 1:]
+        quats = torch.cat([w1 * w2 - (v2 * v1).sum(1, keepdim=True),
+                           w1 * v2 + w2 * v1 + torch.cross(v1.expand_as(v2), v2, dim=1)], 1)
+        out = rasterize(means, quats, *params[2:], K, np.eye(4), W, H, BG, backend=backend)
+        target = torch.linspace(0, 1, W * H * 3, dtype=DT).reshape(H, W, 3)
+        loss = ((out.rgb - target) ** 2).sum() + out.depth.sum()
+        grads[backend] = torch.cat(torch.autograd.grad(loss, [theta, trans]))
+    assert grads["reference"].norm() > 1e-3
+    assert rel_err(grads["cpu"], grads["reference"]) < 1e-3
+
+
+def test_projection_matches_analytic_isotropic_gaussian():
+    """An isotropic Gaussian of std s at depth z on the axis: alpha(d) = o exp(-d^2 / 2 v),
+    v = (f s / z)^2 + 0.3, and zero beyond 3 sigma."""
+    f, z, s, o = 30.0, 2.0, 0.1, 0.6
+    k = intrinsics(f, f, 16.0, 12.0)  # the mean projects to the corner between 4 pixels
+    params = [torch.tensor([[0.0, 0.0, z]], dtype=DT), torch.tensor([[0.7, 0.1, -0.3, 0.2]], dtype=DT),
+              torch.full((1, 3), math.log(s), dtype=DT), torch.tensor([math.log(o / (1 - o))], dtype=DT),
+              torch.full((1, 1, 3), (0.8 - 0.5) / C0, dtype=DT)]
+    out = rasterize(*params, k, np.eye(4), W, H, backend="cpu")
+    v = (f * s / z) ** 2 + 0.3
+    jj, ii = np.meshgrid(np.arange(W) + 0.5 - 16.0, np.arange(H) + 0.5 - 12.0)
+    d2 = jj ** 2 + ii ** 2
+    expected = o * np.exp(-0.5 * d2 / v)
+    expected[(d2 > 9 * v) | (expected < 1 / 255)] = 0.0
+    np.testing.assert_allclose(out.alpha.numpy(), expected, atol=2e-6)
+    np.testing.assert_allclose(out.rgb.numpy()[..., 0], 0.8 * expected, atol=2e-6)
+    np.testing.assert_allclose(out.depth.numpy()[expected > 0], z, rtol=1e-5)
+    assert (out.depth.numpy()[expected == 0] == 0).all()
+
+
+def stacked_on_pixel(opacities, colors, pixel=(5, 7), k=K):
+    """Tiny Gaussians, one behind the other, all centred on pixel ``pixel`` (row, col)."""
+    n = len(opacities)
+    z = torch.linspace(1.0, 2.0, n, dtype=DT)
+    u, v = pixel[1] + 0.5, pixel[0] + 0.5
+    x = (u - k[0, 2]) / k[0, 0] * z
+    y = (v - k[1, 2]) / k[1, 1] * z
+    op = torch.tensor(opacities, dtype=DT)
+    return [torch.stack([x, y, z], 1), torch.tensor([[1.0, 0, 0, 0]] * n, dtype=DT),
+            torch.full((n, 3), -9.0, dtype=DT), torch.log(op / (1 - op)),
+            ((torch.tensor(colors, dtype=DT) - 0.5) / C0)[:, None, :]]
+
+
+def test_early_stop_and_alpha_clamp_exact():
+    # alpha 0.95 each: T = 0.05, 0.0025, 1.25e-4, then 6.25e-6 < 1e-4 -> the 4th is not blended
+    cols = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [1, 1, 1]]
+    params = stacked_on_pixel([0.95] * 5, cols)
+    for backend in ("cpu", "reference"):
+        out = rasterize(*params, K, np.eye(4), W, H, backend=backend)
+        T = 0.05 ** 3
+        assert abs(float(out.alpha[5, 7]) - (1 - T)) < 1e-6
+        np.testing.assert_allclose(out.rgb[5, 7].numpy(), [0.95, 0.05 * 0.95, 0.0025 * 0.95],
+                                   atol=1e-6)
+        # the clamp: opacity 0.9999 gives alpha 0.99 at the centre
+        single = stacked_on_pixel([0.9999], [[0.5, 0.5, 0.5]])
+        out = rasterize(*single, K, np.eye(4), W, H, backend=backend)
+        assert abs(float(out.alpha[5, 7]) - 0.99) < 1e-6
+    assert_match(render_both(stacked_on_pixel([0.95, 0.9, 0.97, 0.8, 0.999], cols)))
+
+
+def test_culled_gaussians_have_no_effect_and_zero_gradient():
+    params = random_scene(5, n=30)
+    extra = random_scene(6, n=12)
+    extra[0] = extra[0].clone()
+    extra[0][:4, 2] = -extra[0][:4, 2]            # behind the camera
+    extra[0][4:6, 2] = 0.0                         # on the camera plane
+    extra[0][6:9, 0] += 50.0                       # far off-screen right
+    extra[0][9:12, 1] -= 40.0                      # far off-screen up
+    both = [torch.cat([a, b]) for a, b in zip(params, extra)]
+    result = render_both(both)
+    assert_match(result)
+    alone = rasterize(*params, K, np.eye(4), W, H, BG, backend="cpu")
+    out, grads = result["cpu"]
+    for name in ("rgb", "depth", "alpha"):
+        assert torch.equal(getattr(out, name), getattr(alone, name))
+    for gr in grads:
+        assert torch.isfinite(gr).all() and (gr[30:] == 0).all()
+
+
+def test_degenerate_scales():
+    params = random_scene(9, n=30)
+    params[2] = params[2].clone()
+    params[2][:10] = -14.0                      # points: only the 0.3 px dilation remains
+    params[2][10:20, 0] = -14.0                 # flat discs
+    params[2][20:25, 1:] = -14.0                # needles
+    assert_match(render_both(params))
+
+
+@pytest.mark.parametrize("backend", ["cpu", "reference"])
+def test_no_gaussians_gives_background(backend):
+    empty = [torch.zeros(0, 3, dtype=DT), torch.zeros(0, 4, dtype=DT), torch.zeros(0, 3, dtype=DT),
+             torch.zeros(0, dtype=DT), torch.zeros(0, 4, 3, dtype=DT)]
+    out = rasterize(*empty, K, np.eye(4), W, H, BG, backend=backend)
+    assert torch.equal(out.rgb, torch.tensor(BG, dtype=DT).expand(H, W, 3))
+    assert (out.alpha == 0).all() and (out.depth == 0).all()
+
+
+def test_one_pixel_image():
+    k = intrinsics(2.0, 2.0, 0.5, 0.5)
+    params = random_scene(3, n=10, degree=2)
+    params[0] = params[0] * torch.tensor([0.1, 0.1, 1.0], dtype=DT)
+    result = render_both(params, width=1, height=1, k=k)
+    assert result["cpu"][0].rgb.shape == (1, 1, 3)
+    assert float(result["reference"][0].alpha.detach()[0, 0]) > 0.5
+    assert_match(result)
+
+
+def test_render_with_camera_and_gaussians():
+    """render(): a world-space camera (OpenGL c2w) sees the same image as rasterize with its w2c."""
+    eye, target = np.array([1.0, -2.0, 0.8]), np.array([0.0, 0.0, 0.3])
+    cam = Camera(K, look_at(eye, target), W, H)
+    params = random_scene(12, n=40, degree=3)
+    params[2] = params[2][:, :1].expand(-1, 3)  # isotropic: orientation-free, frame-independent
+    # move the scene from the identity camera's frame to the world frame of ``cam``
+    c2w_cv = np.linalg.inv(cam.w2c)
+    R, t = torch.tensor(c2w_cv[:3, :3]), torch.tensor(c2w_cv[:3, 3])
+    means = params[0] @ R.T + t
+    gs = Gaussians(means, *params[1:])
+    assert gs.n == 40 and gs.sh_degree == 3
+    back = Gaussians.from_arrays(gs.to_arrays(), dtype=DT)
+    assert torch.allclose(back.means, gs.means, atol=1e-6)
+    out = render(gs, cam, BG, backend="cpu")
+    # the direction-dependent colour differs, so compare alpha and depth (view independent)
+    ident = rasterize(*params, K, np.eye(4), W, H, BG, backend="cpu")
+    assert float((out.alpha - ident.alpha).abs().max()) < 1e-4
+    assert float((out.depth - ident.depth).abs().max()) < 1e-4
+    assert float(ident.alpha.max()) > 0.9
+
+
+def test_device_and_backend_resolution():
+    assert resolve_device("cpu") == torch.device("cpu")
+    assert resolve_backend("auto", torch.device("cpu")) == "cpu"
+    assert resolve_backend("reference", torch.device("cpu")) == "reference"
+    with pytest.raises(ArtgsError):
+        resolve_backend("nope", torch.device("cpu"))
+    if not torch.cuda.is_available():
+        with pytest.raises(ArtgsError, match="CUDA"):
+            resolve_device("cuda")
+        with pytest.raises(ArtgsError, match="gsplat"):
+            resolve_backend("gsplat", torch.device("cpu"))
+
+
+def test_rotation_matrix_is_orthonormal():
+    R = quat_to_rotmat(torch.randn(20, 4, dtype=DT) * 3)
+    assert torch.allclose(R @ R.transpose(1, 2), torch.eye(3, dtype=DT).expand(20, 3, 3), atol=1e-12)
+    assert torch.allclose(torch.linalg.det(R), torch.ones(20, dtype=DT))
