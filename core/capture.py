@@ -38,6 +38,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -130,6 +131,8 @@ def load_capture(path: str | Path) -> Capture:
     """Read and validate the capture folder ``path`` (or its transforms.json); see the module doc."""
     path = Path(path)
     root = path.parent if path.name == TRANSFORMS and path.is_file() else path
+    if not root.is_dir():
+        raise InputError(root, "capture folder not found")
     tj = root / TRANSFORMS
     top = _read_transforms(tj)
     frames_raw = top.get("frames")
@@ -154,7 +157,15 @@ def load_capture(path: str | Path) -> Capture:
                 raise InputError(p, "file not found", frame=s.label, field=key)
 
     maps: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
-    frames = [_load_frame(s, float(scale), maps) for s in specs]
+    for s in specs:  # undistortion tables first, so the decoding threads only read the cache
+        if s.distortion is not None:
+            _undistort_maps(s, maps)
+    # cv2 decodes without the GIL; map() yields in order, so the first bad frame is reported.
+    pool = ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1))
+    try:
+        frames = list(pool.map(lambda s: _load_frame(s, float(scale), maps), specs))
+    finally:
+        pool.shutdown(cancel_futures=True)
     meta = {"transforms": {k: v for k, v in top.items() if k != "frames"},
             "depth_unit_scale_factor": float(scale),
             "undistorted": [s.index for s in specs if s.distortion is not None]}
