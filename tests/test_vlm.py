@@ -1,0 +1,355 @@
+"""VLM route: answer parsing, the HTTP client against a local server, depth lifting, end to end.
+
+The only stand-in is a small OpenAI-compatible HTTP server on 127.0.0.1 with canned answers.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import threading
+import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Callable
+
+import cv2
+import numpy as np
+import pytest
+
+from artgs.core.cameras import Camera, intrinsics, look_at
+from artgs.core.errors import ArtgsError, InputError
+from artgs.core import lift
+from artgs.core.vlm_client import VlmConfig, chat, user_message, vlm_config
+from artgs.core.vlm_parse import parse_classification, parse_handle, parse_parts, to_grid1000
+
+W, H = 160, 120
+
+
+# --- a local OpenAI-compatible server ----------------------------------------------------------
+
+class FakeVlm:
+    """``answer(request_json) -> (status, body_text, delay)``; records every request."""
+
+    def __init__(self, answer: Callable[[dict], tuple[int, str, float]]) -> None:
+        self.answer = answer
+        self.requests: list[tuple[str, dict, dict]] = []
+        fake = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_POST(self) -> None:  # noqa: N802
+                body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
+                fake.requests.append((self.path, dict(self.headers), body))
+                status, text, delay = fake.answer(body)
+                time.sleep(delay)
+                data = text.encode()
+                try:
+                    self.send_response(status)
+                    self.send_header("Content-Type", "application/json")
+                    self.send_header("Content-Length", str(len(data)))
+                    self.end_headers()
+                    self.wfile.write(data)
+                except (BrokenPipeError, ConnectionResetError):
+                    pass
+
+            def log_message(self, *args) -> None:
+                pass
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+
+    @property
+    def endpoint(self) -> str:
+        return f"http://127.0.0.1:{self.server.server_address[1]}/v1"
+
+    def __enter__(self) -> "FakeVlm":
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+def completion(text: str) -> str:
+    return json.dumps({"id": "x", "object": "chat.completion",
+                       "choices": [{"index": 0, "message": {"role": "assistant", "content": text},
+                                    "finish_reason": "stop"}]})
+
+
+def cfg(endpoint: str, **kw) -> VlmConfig:
+    kw.setdefault("timeout", 5.0)
+    kw.setdefault("backoff", 0.01)
+    return VlmConfig(endpoint=endpoint, model="internvl2_5-4b-artgs", **kw)
+
+
+# --- parser --------------------------------------------------------------------------------------
+
+PAPER = ("Part 1 is a door, and its joint type is revolute. The joint parameter is "
+         "[[100, 200, 100, 800]]. Its bounding box is [[100, 200, 500, 800]]. "
+         "Part 2 is a drawer, and its joint type is prismatic. The joint parameter is "
+         "[[700, 480, 700, 520]]. Its bounding box is [[550, 300, 900, 700]].")
+
+
+def test_paper_template_on_the_0_1000_grid_gives_pixel_boxes_and_points():
+    parts = parse_parts(PAPER, W, H)
+    assert [(p.label, p.joint_type, p.skip) for p in parts] == [
+        ("door", "revolute", None), ("drawer", "prismatic", None)]
+    np.testing.assert_allclose(parts[0].joint_points, [[16, 24], [16, 96]])
+    np.testing.assert_allclose(parts[0].bbox, [16, 24, 80, 96])
+    np.testing.assert_allclose(parts[1].bbox, [88, 36, 144, 84])
+
+
+def test_internvl_ref_box_tags_are_always_on_the_grid():
+    text = ("Part 1 is a <ref>door</ref>, and its joint type is revolute. The joint parameter is "
+            "<box>[[500, 100, 500, 900]]</box>. Its bounding box is <box>[[500, 100, 950, 900]]</box>.")
+    # tagged numbers that would also fit as pixels are still read on the 0-1000 grid
+    (p,) = parse_parts(text, 1000 * 2, 1000 * 2)
+    np.testing.assert_allclose(p.bbox, [1000, 200, 1900, 1800])
+    np.testing.assert_allclose(p.joint_points, [[1000, 200], [1000, 1800]])
+    (p,) = parse_parts("<ref>drawer</ref><box>[[100, 500, 900, 700]]</box> slides out", W, H)
+    assert (p.label, p.joint_type, p.skip) == ("drawer", "prismatic", None)
+    np.testing.assert_allclose(p.bbox, [16, 60, 144, 84])
+
+
+def test_plain_lists_rule_pixels_vs_grid_vs_unit():
+    inside = ("Part 1 is a door, and its joint type is revolute. The joint parameter is "
+              "[[20, 10, 20, 100]]. Its bounding box is [[20, 10, 70, 100]].")
+    # all values inside the image: ambiguous -> 0-1000 grid by default, pixels when configured
+    np.testing.assert_allclose(parse_parts(inside, W, H)[0].bbox, [3.2, 1.2, 11.2, 12.0])
+    np.testing.assert_allclose(parse_parts(inside, W, H, "pixels")[0].bbox, [20, 10, 70, 100])
+    # a y above the image height -> the grid, for every list of the answer
+    over = inside.replace("[[20, 10, 70, 100]]", "[[20, 10, 70, 130]]")
+    np.testing.assert_allclose(parse_parts(over, W, H)[0].joint_points, [[3.2, 1.2], [3.2, 12.0]])
+    unit = inside.replace("[[20, 10, 20, 100]]", "[[0.1, 0.1, 0.1, 0.9]]").replace(
+        "[[20, 10, 70, 100]]", "[[0.1, 0.1, 0.5, 0.9]]")
+    np.testing.assert_allclose(parse_parts(unit, W, H)[0].bbox, [16, 12, 80, 108])
+    pairs = "Part 1 is a lid (revolute). Joint: [[10, 20], [150, 20]]; bbox: [10, 20, 150, 100]"
+    np.testing.assert_allclose(parse_parts(pairs, W, H, "pixels")[0].joint_points,
+                               [[10, 20], [150, 20]])
+
+
+def test_qwen_json_in_a_fence_is_in_pixels():
+    text = ("Here you go:\n```json\n[\n {\"bbox_2d\": [40, 10, 120, 110], \"label\": \"left door\", "
+            "\"joint_type\": \"revolute\", \"joint\": [[40, 10], [40, 110]]},\n"
+            " {\"bbox_2d\": [10, 10, 30, 50], \"label\": \"drawer\"}\n]\n```")
+    a, b = parse_parts(text, W, H)
+    assert (a.label, a.joint_type, a.skip) == ("left door", "revolute", None)
+    np.testing.assert_allclose(a.bbox, [40, 10, 120, 110])
+    np.testing.assert_allclose(a.joint_points, [[40, 10], [40, 110]])
+    assert (b.label, b.joint_type, b.skip) == ("drawer", "prismatic", None)  # type from the name
+
+
+def test_handle_answers_in_each_format():
+    for text, want in [("Its handle is [[400, 450, 450, 550]].", [64, 54, 72, 66]),
+                       ("Its handle is <box>[[400, 450, 450, 550]]</box>.", [64, 54, 72, 66]),
+                       ("<|box_start|>(400,450),(450,550)<|box_end|>", [64, 54, 72, 66]),
+                       ('```json\n[{"bbox_2d": [64, 54, 72, 66], "label": "handle"}]\n```',
+                        [64, 54, 72, 66])]:
+        box, reason = parse_handle(text, W, H)
+        assert reason is None, text
+        np.testing.assert_allclose(box, want, err_msg=text)
+    box, reason = parse_handle("There is no handle on this part.", W, H)
+    assert box is None and "no handle box" in reason
+
+
+def test_unusable_answers_become_skip_reasons_never_errors():
+    (p,) = parse_parts("Sorry, I cannot help with that.", W, H)
+    assert p.skip and "no coordinates" in p.skip
+    text = PAPER.replace("[[100, 200, 500, 800]]", "[[100, 200, 1500, 800]]")
+    door, drawer = parse_parts(text, W, H)
+    assert door.skip and "outside" in door.skip and drawer.skip is None
+    text = PAPER.replace("[[100, 200, 100, 800]]", "[[100, 200, 100, 201]]")
+    assert "coincide" in parse_parts(text, W, H)[0].skip
+    text = "Part 1 is a thing. The joint parameter is [[1, 2, 3, 4]]. Its bounding box is [[1, 2, 900, 900]]."
+    assert "no joint type" in parse_parts(text, W, H)[0].skip
+    text = "Part 1 is a door, and its joint type is revolute. Its bounding box is [[1, 2, 900, 900]]."
+    assert "no joint parameter" in parse_parts(text, W, H)[0].skip
+    for garbage in ["", "[[[", "```json\n{not json}\n```", "Part 1 is a door [[1, 2, 3]]"]:
+        assert all(p.skip for p in parse_parts(garbage, W, H))
+
+
+def test_classification_categories_synonyms_and_numbers():
+    cases = {"This is a dishwasher with 1 movable part.": ("dishwasher", 1),
+             "This is a fridge with two movable parts.": ("refrigerator", 2),
+             "This is a microwave oven with one movable part.": ("microwave", 1),
+             "This is an oven with a single movable part.": ("oven", 1),
+             "This is a chest of drawers with four movable components.": ("drawer", 4),
+             "This is a kitchen cabinet with one door and 2 drawers.": ("cabinet", 3),
+             "This is a wardrobe with 3 movable parts": ("storage", 3),
+             "I see a box.": (None, None)}
+    for text, want in cases.items():
+        assert parse_classification(text) == want, text
+
+
+def test_grid_conversion_round_trips():
+    assert to_grid1000(np.array([16, 24, 80, 96]), W, H) == [100, 200, 500, 800]
+
+
+# --- client ---------------------------------------------------------------------------------------
+
+def test_request_format_image_and_authorization(monkeypatch):
+    png = cv2.imencode(".png", np.full((8, 6, 3), 77, np.uint8))[1].tobytes()
+    with FakeVlm(lambda body: (200, completion("This is an oven with 1 movable part."), 0)) as fake:
+        monkeypatch.setenv("ARTGS_VLM_API_KEY", "sk-test-123")
+        monkeypatch.setenv("ARTGS_VLM_MODEL", "internvl2_5-4b-artgs")
+        config = vlm_config(fake.endpoint, None, timeout=5)
+        assert "sk-test-123" not in repr(config)
+        assert chat(config, [user_message("What is it?", png)]) == "This is an oven with 1 movable part."
+    path, headers, body = fake.requests[0]
+    assert path == "/v1/chat/completions"
+    assert headers["Authorization"] == "Bearer sk-test-123"
+    assert body["model"] == "internvl2_5-4b-artgs" and body["temperature"] == 0
+    assert body["max_tokens"] > 0
+    text, image = body["messages"][0]["content"]
+    assert text == {"type": "text", "text": "What is it?"}
+    url = image["image_url"]["url"]
+    assert url.startswith("data:image/png;base64,")
+    assert base64.b64decode(url.split(",", 1)[1]) == png
+
+
+def test_no_key_no_authorization_header_and_config_errors(monkeypatch):
+    for var in ("ARTGS_VLM_ENDPOINT", "ARTGS_VLM_MODEL", "ARTGS_VLM_API_KEY", "ARTGS_VLM_COORDS"):
+        monkeypatch.delenv(var, raising=False)
+    with pytest.raises(InputError, match="ARTGS_VLM_ENDPOINT"):
+        vlm_config(None, "m")
+    with pytest.raises(InputError, match="ARTGS_VLM_MODEL"):
+        vlm_config("http://127.0.0.1:9/v1", None)
+    with pytest.raises(InputError, match="http"):
+        vlm_config("127.0.0.1:9", "m")
+    monkeypatch.setenv("ARTGS_VLM_ENDPOINT", "http://example.invalid/v1/")
+    monkeypatch.setenv("ARTGS_VLM_COORDS", "pixels")
+    c = vlm_config(None, "m")
+    assert (c.endpoint, c.api_key, c.coords) == ("http://example.invalid/v1", None, "pixels")
+    with FakeVlm(lambda body: (200, completion("ok"), 0)) as fake:
+        assert chat(cfg(fake.endpoint), [user_message("hi")]) == "ok"
+    assert "Authorization" not in fake.requests[0][1]
+
+
+def test_retries_server_errors_then_succeeds():
+    statuses = iter([500, 503, 200])
+
+    def answer(body):
+        s = next(statuses)
+        return (s, completion("fine") if s == 200 else '{"error": "overloaded"}', 0)
+
+    with FakeVlm(answer) as fake:
+        assert chat(cfg(fake.endpoint, retries=2), [user_message("hi")]) == "fine"
+    assert len(fake.requests) == 3
+    with FakeVlm(lambda body: (502, "bad gateway", 0)) as fake:
+        with pytest.raises(ArtgsError, match=r"HTTP 502.*bad gateway.*after 2 attempts"):
+            chat(cfg(fake.endpoint, retries=1), [user_message("hi")])
+    assert len(fake.requests) == 2
+
+
+def test_client_error_is_not_retried_and_names_endpoint_status_and_body():
+    with FakeVlm(lambda body: (400, '{"error": "model not found: foo"}', 0)) as fake:
+        with pytest.raises(ArtgsError) as err:
+            chat(cfg(fake.endpoint, retries=3), [user_message("hi")])
+    msg = str(err.value)
+    assert fake.endpoint in msg and "HTTP 400" in msg and "model not found" in msg
+    assert len(fake.requests) == 1
+
+
+def test_timeout_and_unreachable_and_bad_body_errors():
+    with FakeVlm(lambda body: (200, completion("late"), 1.0)) as fake:
+        t0 = time.perf_counter()
+        with pytest.raises(ArtgsError, match="no answer within 0.2 s"):
+            chat(cfg(fake.endpoint, timeout=0.2, retries=3), [user_message("hi")])
+        assert time.perf_counter() - t0 < 0.9  # not retried
+    with FakeVlm(lambda body: (200, "<html>not json</html>", 0)) as fake:
+        with pytest.raises(ArtgsError, match="not a chat completion.*not json"):
+            chat(cfg(fake.endpoint), [user_message("hi")])
+        endpoint = fake.endpoint
+    with pytest.raises(ArtgsError, match=r"unreachable.*after 2 attempts"):
+        chat(cfg(endpoint, retries=1), [user_message("hi")])  # server closed: connection refused
+
+
+# --- lifting against hand-made depth ---------------------------------------------------------------
+
+def _plane_depth(camera: Camera, point, normal) -> np.ndarray:
+    """z-depth of the plane through ``point`` with ``normal`` at every pixel."""
+    rays = lift.rays(camera, np.stack(np.meshgrid(np.arange(camera.width) + 0.5,
+                                                  np.arange(camera.height) + 0.5), -1).reshape(-1, 2))
+    t = ((np.asarray(point) - camera.center) @ normal) / (rays @ normal)
+    return t.reshape(camera.height, camera.width)
+
+
+def _camera(eye, target) -> Camera:
+    return Camera(intrinsics(150.0, 150.0, W / 2, H / 2), look_at(np.array(eye), np.array(target)),
+                  W, H)
+
+
+def test_revolute_hinge_from_exact_image_points_on_a_door_plane():
+    # a door in the plane x = 0.3 (normal +x), hinge along z at y = -0.2, seen from an oblique view
+    cam = _camera([1.6, 0.5, 0.9], [0.3, 0.0, 0.4])
+    normal = np.array([1.0, 0, 0])
+    depth = _plane_depth(cam, [0.3, 0, 0], normal)
+    door = np.array([[0.3, -0.2, 0.1], [0.3, 0.25, 0.1], [0.3, 0.25, 0.7], [0.3, -0.2, 0.7]])
+    uv, _ = cam.project(door)
+    pix = np.stack(np.meshgrid(np.arange(W) + 0.5, np.arange(H) + 0.5), -1).reshape(-1, 2)
+    world = lift.backproject_uv(cam, pix, depth.reshape(-1)).reshape(H, W, 3)
+    depth[world[..., 1] < -0.2] = 3.0  # beyond the hinge edge: the far background (a depth edge)
+    box = np.array([uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
+    plane = lift.fit_plane(cam, depth, box)
+    assert _deg(plane.normal, normal) < 1.0
+    hinge_uv, _ = cam.project(np.array([[0.3, -0.2, 0.12], [0.3, -0.2, 0.68]]))
+    axis, origin, trusted = lift.revolute_axis(cam, depth, hinge_uv, plane)
+    assert trusted
+    assert _deg(axis, [0, 0, 1.0], signed=False) < 2.0
+    assert np.linalg.norm(np.cross(origin - [0.3, -0.2, 0.4], [0, 0, 1.0])) < 0.01
+    center, _, _, size = lift.box_frame(cam, box, plane)
+    axis = lift.opening_sign(axis, origin, center, plane.normal)
+    assert axis @ [0, 0, 1.0] < 0  # free edge at +y swings towards +x for a rotation about -z
+    # no depth along the segment: the 2D segment is lifted onto the part's plane instead
+    axis2, origin2, trusted2 = lift.revolute_axis(cam, np.zeros_like(depth), hinge_uv, plane)
+    assert not trusted2
+    assert _deg(axis2, [0, 0, 1.0], signed=False) < 1.0
+    assert np.linalg.norm(np.cross(origin2 - [0.3, -0.2, 0.4], [0, 0, 1.0])) < 0.005
+
+
+def _unit(v):
+    return np.asarray(v) / np.linalg.norm(v)
+
+
+def _deg(a, b, signed: bool = True) -> float:
+    c = float(np.dot(_unit(a), _unit(b)))
+    return math.degrees(math.acos(np.clip(c if signed else abs(c), -1.0, 1.0)))
+
+
+def test_prismatic_normal_extent_and_handle_on_a_tilted_drawer_front():
+    n = _unit([1.0, 0.4, 0.0])  # drawer front facing (1, 0.4, 0)
+    cam = _camera(list(np.array([0.0, 0.0, 0.5]) + 1.4 * n + [0.3, -0.5, 0.6]), [0.0, 0.0, 0.5])
+    depth = _plane_depth(cam, [0, 0, 0.5], n)
+    side = _unit(np.cross([0, 0, 1.0], n))
+    corners = np.array([[0, 0, 0.5] + s * 0.25 * side + t * 0.1 * np.array([0, 0, 1.0])
+                        for s, t in [(-1, -1), (1, -1), (1, 1), (-1, 1)]])
+    uv, _ = cam.project(corners)
+    box = np.array([uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
+    # a handle bar 3 cm proud of the front in the middle of the box
+    huv, _ = cam.project(np.array([[0, 0, 0.5] + 0.03 * n - 0.08 * side + [0, 0, -0.01],
+                                   [0, 0, 0.5] + 0.03 * n + 0.08 * side + [0, 0, 0.01]]))
+    hbox = np.array([huv[:, 0].min(), huv[:, 1].min(), huv[:, 0].max(), huv[:, 1].max()])
+    i0, i1, j0, j1 = (int(hbox[1]), int(math.ceil(hbox[3])), int(hbox[0]), int(math.ceil(hbox[2])))
+    handle_plane = _plane_depth(cam, np.array([0, 0, 0.5]) + 0.03 * n, n)
+    depth[i0:i1, j0:j1] = handle_plane[i0:i1, j0:j1]
+    plane = lift.fit_plane(cam, depth, box)
+    axis = lift.prismatic_axis(cam, box, plane)
+    assert _deg(axis, n) < 2.0  # pointing out of the front, towards the camera
+    ext = lift.extent(cam, box, plane)
+    np.testing.assert_allclose(np.abs(np.array(ext["axes"]) @ np.array(ext["axes"]).T), np.eye(3),
+                               atol=1e-9)
+    assert _deg(ext["axes"][2], n) < 2.0
+    assert np.linalg.norm(np.array(ext["center"]) - [0, 0, 0.5] - 0.015 * n) < 0.03
+    h = lift.handle(cam, depth, hbox, plane)
+    assert np.linalg.norm(np.array(h["point"]) - ([0, 0, 0.5] + 0.03 * n)) < 0.02
+    assert _deg(h["approach"], -n) < 2.0
+
+
+def test_robust_depth_prefers_the_near_layer_at_an_edge():
+    depth = np.full((10, 10), 2.0)
+    depth[:, 5:] = 1.0
+    depth[0, 0] = 0.0
+    z = lift.robust_depth(depth, np.array([[5.2, 5.0], [2.0, 5.0], [0.5, 0.5]]), radius=2)
+    np.testing.assert_allclose(z, [1.0, 2.0, 2.0])
+    assert lift.robust_depth(np.zeros((4, 4)), np.array([[1.0, 1.0]]))[0] == 0.0
