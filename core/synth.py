@@ -40,7 +40,7 @@ from .errors import InputError
 from .joints import Articulation, Joint, write_articulation
 from .progress import QUIET, Progress
 from .synth_objects import ObjectSpec, random_spec
-from .synth_render import Scene
+from .synth_render import Scene, make_texture
 
 #: Focal length as a multiple of the image width.
 FOCAL_FACTOR = 1.1
@@ -175,15 +175,16 @@ def _fit(camera: Camera, spec: ObjectSpec, centre: np.ndarray, fill: float) -> C
 
 def interaction_cameras(spec: ObjectSpec, K: np.ndarray, width: int, height: int,
                         rng: np.random.Generator) -> list[Camera]:
-    """Two fixed cameras, left-front and right-front, about as close as the framing distance."""
+    """Two fixed cameras, left-front and right-front, framing the closed object tightly (opening
+    parts may leave the field of view)."""
     centre, _, dist = framing(spec, K, width, height)
     yaw = math.atan2(spec.base_pose[1, 0], spec.base_pose[0, 0])
     cams = []
     for side in (-1.0, 1.0):
         az = side * math.radians(rng.uniform(30, 45))
         el = math.radians(rng.uniform(15, 30))
-        cams.append(_orbit_camera(K, width, height, centre, yaw + az, el,
-                                  dist * rng.uniform(0.9, 1.05)))
+        cam = _orbit_camera(K, width, height, centre, yaw + az, el, dist)
+        cams.append(_fit(cam, spec, centre, rng.uniform(0.7, 0.85)))
     return cams
 
 
@@ -207,7 +208,10 @@ def _write_capture(root: Path, spec: ObjectSpec, width: int, height: int, static
     urdf = root / "gt.urdf"
     atomic.write_text(urdf, spec.to_urdf())
     frames: list[dict[str, Any]] = []
+    texture = make_texture(np.random.default_rng([spec.seed, CATEGORIES.index(spec.category), 3]))
     with Scene(urdf) as scene:
+        if texture is not None:
+            scene.set_texture(texture)
         def shoot(stem: str, camera: Camera, extra: dict[str, Any]) -> None:
             dist = float(np.linalg.norm(camera.center - centre))
             near, far = max(0.01, dist - 2.5 * radius), dist + 2.5 * radius

@@ -9,8 +9,11 @@ centre at (j + 0.5, i + 0.5)).
 
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pybullet as p
 
@@ -64,6 +67,18 @@ class Scene:
     def __exit__(self, *exc) -> None:
         p.disconnect(self.client)
 
+    def set_texture(self, image: np.ndarray) -> None:
+        """Apply an RGB texture (uint8 HxWx3, multiplies the panel colours) to every link."""
+        fd, path = tempfile.mkstemp(suffix=".png")
+        os.close(fd)
+        try:
+            cv2.imwrite(path, image[:, :, ::-1])
+            tex = p.loadTexture(path, physicsClientId=self.client)
+        finally:
+            os.unlink(path)
+        for link in range(-1, p.getNumJoints(self.body, physicsClientId=self.client)):
+            p.changeVisualShape(self.body, link, textureUniqueId=tex, physicsClientId=self.client)
+
     def set_states(self, states: dict[str, float]) -> None:
         """Set the named joints to the given values (radians / metres)."""
         for name, value in states.items():
@@ -87,3 +102,21 @@ class Scene:
         depth = 2.0 * far * near / ((far + near) - ndc * (far - near))
         depth = np.where(mask, depth, 0.0).astype(np.float32)
         return rgb, depth, mask
+
+
+def make_texture(rng: np.random.Generator, size: int = 128) -> np.ndarray | None:
+    """A cheap random texture (wood-like grain or speckle, grey levels 0.6..1) or None (plain)."""
+    kind = rng.choice(["plain", "grain", "speckle"])
+    if kind == "plain":
+        return None
+    noise = cv2.GaussianBlur(rng.random((size, size)).astype(np.float32), (0, 0), 1.5)
+    noise = (noise - noise.min()) / max(float(np.ptp(noise)), 1e-6)
+    if kind == "grain":
+        y = np.arange(size, dtype=np.float32)[:, None]
+        freq = rng.uniform(0.15, 0.4)
+        phase = 6.0 * cv2.GaussianBlur(rng.random((size, size)).astype(np.float32), (0, 0), 8)
+        value = 0.5 + 0.5 * np.sin(freq * y + 4.0 * phase) * (0.6 + 0.4 * noise)
+    else:
+        value = noise
+    grey = 0.6 + 0.4 * np.clip(value, 0.0, 1.0)
+    return np.repeat((255 * grey)[:, :, None], 3, axis=2).astype(np.uint8)
