@@ -353,3 +353,138 @@ def test_robust_depth_prefers_the_near_layer_at_an_edge():
     z = lift.robust_depth(depth, np.array([[5.2, 5.0], [2.0, 5.0], [0.5, 0.5]]), radius=2)
     np.testing.assert_allclose(z, [1.0, 2.0, 2.0])
     assert lift.robust_depth(np.zeros((4, 4)), np.array([[1.0, 1.0]]))[0] == 0.0
+
+
+# --- end to end on a synthetic object ----------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def cabinet(tmp_path_factory):
+    """A synthetic cabinet (door + drawer), its ground truth and a depth-initialised static splat."""
+    from artgs.core.capture import load_capture
+    from artgs.core.gaussians import Gaussians
+    from artgs.core.joints import read_articulation
+    from artgs.core.reconstruct import initial_splats
+    from artgs.core.synth import generate_object
+
+    root = generate_object(tmp_path_factory.mktemp("vlm") / "cabinet", "cabinet", 3, width=W,
+                           height=H, static_views=12, steps=2)
+    capture = load_capture(root)
+    splats, _ = initial_splats(capture.static)
+    return capture, Gaussians.from_arrays(splats), read_articulation(root / "gt.json").joints
+
+
+def _front_box(camera: Camera, joint) -> np.ndarray:
+    """Pixel box of the face of the joint's extent box that faces the camera."""
+    e = joint.extent
+    axes, half, c = np.array(e["axes"]), np.array(e["half_size"]), np.array(e["center"])
+    k = int(np.argmax(np.abs(axes @ camera.forward)))
+    s = -np.sign(axes[k] @ camera.forward)
+    others = [i for i in range(3) if i != k]
+    corners = np.array([c + s * half[k] * axes[k] + a * half[others[0]] * axes[others[0]]
+                        + b * half[others[1]] * axes[others[1]] for a in (-1, 1) for b in (-1, 1)])
+    uv, _ = camera.project(corners)
+    return np.concatenate([uv.min(0), uv.max(0)])
+
+
+def _grid(values, camera: Camera) -> str:
+    v = np.asarray(values, float).reshape(-1, 2) * 1000 / np.array([camera.width, camera.height])
+    return "<box>[[" + ", ".join(str(int(round(x))) for x in v.ravel()) + "]]</box>"
+
+
+def _canned_answers(camera: Camera, joints, broken: int | None = None) -> Callable:
+    """A server answering the three questions from the ground truth projected into ``camera``."""
+    lines, boxes, handles = [], [], []
+    for n, j in enumerate(joints, 1):
+        box = _front_box(camera, j)
+        boxes.append(box)
+        hb, _ = camera.project(np.array([j.handle["point"]]))
+        handles.append(np.concatenate([hb[0] - 3, hb[0] + 3]))
+        if j.type == "revolute":
+            e = j.extent
+            reach = np.abs(np.array(e["axes"]) @ j.axis) @ np.array(e["half_size"])
+            ts = (np.array(e["center"]) - j.origin) @ j.axis + np.array([-1, 1]) * reach
+            points, _ = camera.project(j.origin + ts[:, None] * j.axis)
+        else:
+            points = np.array([box[:2] + box[2:], box[:2] + box[2:]]) / 2 + [[0, -1], [0, 1]]
+        label = "door" if j.type == "revolute" else "drawer"
+        box_text = "[[n/a]]" if n == broken else _grid(box, camera)
+        lines.append(f"Part {n} is a {label}, and its joint type is {j.type}. The joint parameter "
+                     f"is {_grid(points, camera)}. Its bounding box is {box_text}.")
+
+    def answer(body):
+        last = body["messages"][-1]["content"]
+        text = last if isinstance(last, str) else last[0]["text"]
+        if "What is the object" in text:
+            reply = f"This is a cabinet with {len(joints)} movable parts."
+        elif "joint types" in text:
+            reply = " ".join(lines)
+        else:
+            asked = np.array([float(v) for v in text.split("[[")[1].split("]]")[0].split(",")])
+            asked = asked * np.array([camera.width, camera.height] * 2) / 1000
+            k = int(np.argmin([np.abs(b - asked).sum() for b in boxes]))
+            reply = f"Its handle is {_grid(handles[k], camera)}."
+        return 200, completion(reply), 0.0
+    return answer
+
+
+def _view(meta) -> Camera:
+    v = meta["view"]
+    return Camera(np.array(v["K"]), np.array(v["c2w"]), v["width"], v["height"])
+
+
+def test_propose_vlm_end_to_end_recovers_the_ground_truth_joints(cabinet):
+    import io
+
+    from artgs.core.metrics import match_joints
+    from artgs.core.progress import Progress
+    from artgs.core.propose_vlm import frontal_camera, propose_vlm
+
+    capture, gaussians, gt = cabinet
+    config = cfg("http://unused", width=W, height=H)
+    camera = frontal_camera(capture, gaussians.means.numpy().astype(float), W, H)
+    # the view looks at the front: against the object's front normal (object x = gt drawer axis)
+    front = next(j for j in gt if j.type == "prismatic").axis
+    assert _deg(camera.forward * [1, 1, 0], -front * [1, 1, 0]) < 3.0
+    with FakeVlm(_canned_answers(camera, gt)) as fake:
+        stream = io.StringIO()
+        joints, meta = propose_vlm(capture, gaussians, Progress("json", stream=stream),
+                                   VlmConfig(endpoint=fake.endpoint, model="m", width=W, height=H,
+                                             timeout=10))
+    np.testing.assert_allclose(_view(meta).c2w, camera.c2w)
+    assert meta["category"] == "cabinet" and meta["parts_said"] == 2 and meta["skipped"] == []
+    assert len(fake.requests) == 2 + len(gt)
+    assert fake.requests[1][2]["messages"][1]["role"] == "assistant"  # bones continues the chat
+    scores = match_joints(joints, gt)
+    for s in scores:
+        assert s.type_correct, s
+        assert s.axis_error_deg < 3.0, s
+        assert s.origin_error_cm is None or s.origin_error_cm < 2.0, s
+    for j in joints:
+        t = next(t for t in gt if t.type == j.type)
+        assert j.source == "vlm" and 0 < j.confidence <= 1
+        assert np.linalg.norm(np.array(j.handle["point"]) - t.handle["point"]) < 0.04
+        assert _deg(j.handle["approach"], t.handle["approach"]) < 5.0
+        assert np.linalg.norm(np.array(j.extent["center"]) - t.extent["center"]) < (
+            0.05 if j.type == "revolute" else 0.35)  # the drawer's gt box includes its tray
+        if j.type == "revolute":  # positive angles open the door like the ground truth
+            assert j.axis @ t.axis > 0
+
+
+def test_propose_vlm_skips_an_unparseable_part_and_keeps_the_others(cabinet):
+    import io
+
+    from artgs.core.progress import Progress
+    from artgs.core.propose_vlm import frontal_camera, propose_vlm
+
+    capture, gaussians, gt = cabinet
+    camera = frontal_camera(capture, gaussians.means.numpy().astype(float), W, H)
+    broken = 1 + next(k for k, j in enumerate(gt) if j.type == "prismatic")
+    with FakeVlm(_canned_answers(camera, gt, broken=broken)) as fake:
+        stream = io.StringIO()
+        joints, meta = propose_vlm(capture, gaussians, Progress("json", stream=stream),
+                                   VlmConfig(endpoint=fake.endpoint, model="m", width=W, height=H))
+    assert [j.type for j in joints] == ["revolute"]
+    assert len(meta["skipped"]) == 1 and f"part {broken}" in meta["skipped"][0]
+    events = [json.loads(line) for line in stream.getvalue().splitlines()]
+    warnings = [e["message"] for e in events if e["event"] == "log" and e["level"] == "warning"]
+    assert any(f"part {broken}" in w and "no bounding box" in w for w in warnings)
