@@ -214,7 +214,7 @@ def _write_capture(root: Path, spec: ObjectSpec, width: int, height: int, static
             scene.set_texture(texture)
         def shoot(stem: str, camera: Camera, extra: dict[str, Any]) -> None:
             dist = float(np.linalg.norm(camera.center - centre))
-            near, far = max(0.01, dist - 2.5 * radius), dist + 2.5 * radius
+            near, far = 0.05, dist + 4.0 * radius     # open parts stay within 3 radii of the centre
             rgb, depth, mask = scene.render(camera, near, far)
             if depth_noise > 0:
                 noisy = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
@@ -256,7 +256,7 @@ def _ground_truth(spec: ObjectSpec, schedule: list[dict[str, float]]) -> Articul
                         "half_size": [float(v) for v in (hi - lo) / 2]}
         handle = q.boxes[-1]
         joint.handle = {"point": [float(v) for v in R @ (np.array(handle.center) + q.origin) + t],
-                        "approach": [float(v) for v in -R[:, 0]]}
+                        "approach": [float(v) + 0.0 for v in -R[:, 0]]}
         joints.append(joint)
     return Articulation(joints, {"category": spec.category, "seed": spec.seed})
 

@@ -12,7 +12,8 @@ with the object frame; joint value 0 = closed:
 - drawer: prismatic along +x, joint origin at the centre of the drawer front (a point of the part).
 
 The URDF has a root link ``world`` and a fixed joint ``base_pose`` carrying the base pose, so loading
-it at the identity base pose places everything in the world frame.
+it at the identity base pose places everything in the world frame. Every box is both a visual and a
+collision shape, so the ground truth can be grasped and pushed in PyBullet (manipulation metric).
 """
 
 from __future__ import annotations
@@ -273,7 +274,7 @@ def _oven(rng: np.random.Generator) -> _Builder:
 
 
 def _microwave(rng: np.random.Generator) -> _Builder:
-    b = _Builder(rng, rng.uniform(0.45, 0.65), rng.uniform(0.35, 0.45), rng.uniform(0.28, 0.38))
+    b = _Builder(rng, rng.uniform(0.45, 0.65), rng.uniform(0.35, 0.45), rng.uniform(0.3, 0.38))
     b.hollow_body()
     split = b.W / 2 - rng.uniform(0.22, 0.3) * b.W
     b.panel(-b.D / 2 + _PANEL, b.D / 2, split, split + _PANEL, _PANEL, b.H - _PANEL, b.inner)
@@ -413,6 +414,10 @@ def _link(name: str, boxes: list[Box]) -> list[str]:
                   f'      <origin xyz="{_v(b.center)}" rpy="0 0 0"/>',
                   f'      <geometry><box size="{size}"/></geometry>',
                   f'      <material name="{name}_{k}"><color rgba="{_v(b.rgba)}"/></material>',
-                  '    </visual>']
+                  '    </visual>',
+                  '    <collision>',
+                  f'      <origin xyz="{_v(b.center)}" rpy="0 0 0"/>',
+                  f'      <geometry><box size="{size}"/></geometry>',
+                  '    </collision>']
     lines.append("  </link>")
     return lines

@@ -209,3 +209,23 @@ def test_command_line(tmp_path):
     paths = generate_set(tmp_path / "api", ["microwave"], 1, 0, width=32, height=24,
                          static_views=1, steps=1)
     assert paths == [tmp_path / "api" / "microwave_00"]
+
+
+def test_collision_shapes_and_handles(objects):
+    """gt.urdf has collision boxes: a ray along each joint's handle approach hits that joint's child
+    link at the handle (what a grasp in the manipulation metric relies on)."""
+    for category, root in objects.items():
+        gt = read_articulation(root / "gt.json")
+        cid = p.connect(p.DIRECT)
+        try:
+            body = p.loadURDF(str(root / "gt.urdf"), useFixedBase=True, physicsClientId=cid)
+            links = {p.getJointInfo(body, j, physicsClientId=cid)[12].decode(): j
+                     for j in range(p.getNumJoints(body, physicsClientId=cid))}
+            for joint in gt.joints:
+                point, approach = np.array(joint.handle["point"]), np.array(joint.handle["approach"])
+                hit = p.rayTest((point - 0.5 * approach).tolist(), (point + 0.1 * approach).tolist(),
+                                physicsClientId=cid)[0]
+                assert hit[0] == body and hit[1] == links[joint.child], (category, joint.name)
+                assert np.linalg.norm(np.array(hit[3]) - point) < 0.02
+        finally:
+            p.disconnect(cid)
