@@ -56,9 +56,8 @@ def generate_object(out: str | Path, category: str, seed: int, *, width: int = 1
     """
     out = Path(out)
     _check_options(width, height, static_views, steps, depth_noise)
-    if category not in CATEGORIES:
-        raise InputError("command line", f"unknown category {category!r}; expected one of "
-                         f"{', '.join(CATEGORIES)}", field="category")
+    _check_category(category)
+    _check_seed(seed)
     _check_target(out)
     spec = random_spec(category, seed)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -85,8 +84,8 @@ def generate_set(out: str | Path, categories: list[str] | tuple[str, ...] | None
         raise InputError("command line", f"must be between 1 and {_MAX_PER_CATEGORY}",
                          field="per-category")
     for c in categories:
-        if c not in CATEGORIES:
-            raise InputError("command line", f"unknown category {c!r}", field="category")
+        _check_category(c)
+    _check_seed(seed)
     _check_options(opts.get("width", 160), opts.get("height", 120), opts.get("static_views", 24),
                    opts.get("steps", 6), opts.get("depth_noise", 0.0))
     jobs = [(c, k) for c in categories for k in range(per_category)]
@@ -161,9 +160,7 @@ def static_cameras(spec: ObjectSpec, K: np.ndarray, width: int, height: int, n: 
 def _fit(camera: Camera, spec: ObjectSpec, centre: np.ndarray, fill: float) -> Camera:
     """``camera`` moved along its viewing ray so the closed object spans ``fill`` of the image
     (its box corners stay inside the frame)."""
-    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    corners = np.concatenate([(signs * half) @ T[:3, :3].T + T[:3, 3]
-                              for T, half, _ in spec.boxes_at()])
+    corners = spec.corners()
     half_wh = np.array([camera.width, camera.height]) / 2
     for _ in range(4):
         uv, _ = camera.project(corners)
@@ -207,35 +204,29 @@ def _write_capture(root: Path, spec: ObjectSpec, width: int, height: int, static
 
     urdf = root / "gt.urdf"
     atomic.write_text(urdf, spec.to_urdf())
-    frames: list[dict[str, Any]] = []
+    shots = [(f"static_{k:03d}", cam, None, {"phase": "static"}) for k, cam in enumerate(statics)]
+    shots += [(f"t{t:03d}_cam{c}", cam, states, {"phase": "interaction", "time": t})
+              for t, states in enumerate(schedule) for c, cam in enumerate(fixed)]
     texture = make_texture(np.random.default_rng([spec.seed, CATEGORIES.index(spec.category), 3]))
+    frames: list[dict[str, Any]] = []
     with Scene(urdf) as scene:
         if texture is not None:
             scene.set_texture(texture)
-        def shoot(stem: str, camera: Camera, extra: dict[str, Any]) -> None:
-            dist = float(np.linalg.norm(camera.center - centre))
-            near, far = 0.05, dist + 4.0 * radius     # open parts stay within 3 radii of the centre
-            rgb, depth, mask = scene.render(camera, near, far)
+        for stem, camera, states, extra in shots:
+            if states is not None:
+                scene.set_states(states)
+            # open parts stay within 3 bounding radii of the centre: the far plane never clips
+            far = float(np.linalg.norm(camera.center - centre)) + 4.0 * radius
+            rgb, depth, mask = scene.render(camera, 0.05, far)
             if depth_noise > 0:
                 noisy = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
                 depth = np.where(mask, np.maximum(noisy, 1e-3), 0.0).astype(np.float32)
-            _write_png(root / "images" / f"{stem}.png", rgb[:, :, ::-1])
-            _write_png(root / "masks" / f"{stem}.png", mask.astype(np.uint8) * 255)
-            buf = io.BytesIO()
-            np.save(buf, depth)
-            atomic.write_bytes(root / "depth" / f"{stem}.npy", buf.getvalue())
+            _write_frame(root, stem, rgb, depth, mask)
             frames.append({"file_path": f"images/{stem}.png",
                            "depth_file_path": f"depth/{stem}.npy",
                            "mask_path": f"masks/{stem}.png",
                            "transform_matrix": [[float(v) for v in row] for row in camera.c2w],
                            **extra})
-
-        for k, cam in enumerate(statics):
-            shoot(f"static_{k:03d}", cam, {"phase": "static"})
-        for t, states in enumerate(schedule):
-            scene.set_states(states)
-            for c, cam in enumerate(fixed):
-                shoot(f"t{t:03d}_cam{c}", cam, {"phase": "interaction", "time": t})
 
     atomic.write_json(root / "transforms.json", {
         "camera_model": "PINHOLE", "fl_x": float(K[0, 0]), "fl_y": float(K[1, 1]),
@@ -261,6 +252,16 @@ def _ground_truth(spec: ObjectSpec, schedule: list[dict[str, float]]) -> Articul
     return Articulation(joints, {"category": spec.category, "seed": spec.seed})
 
 
+def _write_frame(root: Path, stem: str, rgb: np.ndarray, depth: np.ndarray,
+                 mask: np.ndarray) -> None:
+    """images/<stem>.png, depth/<stem>.npy (float32 metres), masks/<stem>.png (0/255)."""
+    _write_png(root / "images" / f"{stem}.png", rgb[:, :, ::-1])
+    _write_png(root / "masks" / f"{stem}.png", mask.astype(np.uint8) * 255)
+    buf = io.BytesIO()
+    np.save(buf, depth)
+    atomic.write_bytes(root / "depth" / f"{stem}.npy", buf.getvalue())
+
+
 def _write_png(path: Path, image: np.ndarray) -> None:
     ok, data = cv2.imencode(".png", image)
     if not ok:
@@ -277,6 +278,17 @@ def _check_options(width: int, height: int, static_views: int, steps: int,
     if not (math.isfinite(depth_noise) and depth_noise >= 0):
         raise InputError("command line", f"must be a finite number >= 0, not {depth_noise}",
                          field="depth-noise")
+
+
+def _check_category(category: str) -> None:
+    if category not in CATEGORIES:
+        raise InputError("command line", f"unknown category {category!r}; expected one of "
+                         f"{', '.join(CATEGORIES)}", field="category")
+
+
+def _check_seed(seed: int) -> None:
+    if int(seed) < 0:
+        raise InputError("command line", f"must be >= 0, not {seed}", field="seed")
 
 
 def _check_target(out: Path) -> None:

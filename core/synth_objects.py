@@ -86,23 +86,24 @@ class ObjectSpec:
                 out.append((T @ _translation(b.center), np.array(b.half), q.child))
         return out
 
+    def corners(self) -> np.ndarray:
+        """World corners (8 per box) of every box of the closed object, (8 * boxes, 3)."""
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        return np.concatenate([(signs * half) @ T[:3, :3].T + T[:3, 3]
+                               for T, half, _ in self.boxes_at()])
+
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """World axis-aligned bounds (min, max) of the closed object."""
-        corners = []
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        for T, half, _ in self.boxes_at():
-            local = signs * half
-            corners.append(local @ T[:3, :3].T + T[:3, 3])
-        pts = np.concatenate(corners)
+        pts = self.corners()
         return pts.min(0), pts.max(0)
 
     def to_urdf(self) -> str:
         """URDF text: ``world`` root, fixed ``base_pose`` joint, base link, one link per part."""
         yaw = math.atan2(self.base_pose[1, 0], self.base_pose[0, 0])
-        lines = [f'<?xml version="1.0"?>', f'<robot name="{self.category}">',
+        lines = ['<?xml version="1.0"?>', f'<robot name="{self.category}">',
                  '  <link name="world"/>',
                  '  <joint name="base_pose" type="fixed">',
-                 f'    <parent link="world"/>\n    <child link="base"/>',
+                 '    <parent link="world"/>\n    <child link="base"/>',
                  f'    <origin xyz="{_v(self.base_pose[:3, 3])}" rpy="0 0 {_f(yaw)}"/>',
                  '  </joint>']
         lines += _link("base", self.body)
