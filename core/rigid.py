@@ -106,15 +106,15 @@ class IcpResult:
 
 def icp(source: np.ndarray, target: np.ndarray, target_normals: np.ndarray, T0: np.ndarray,
         *, tree: cKDTree | None = None, max_distance: float = 0.05, min_distance: float = 0.005,
-        iterations: int = 40, point_weight: float = 0.1,
+        iterations: int = 40, point_weight: float = 0.02,
         keep: Callable[[np.ndarray], np.ndarray] | None = None) -> IcpResult:
     """Robust point-to-plane ICP of ``source`` onto ``target`` (with unit ``target_normals``).
 
     Each iteration: transform the source, drop points ``keep`` rejects (e.g. occluded in every
-    view), match nearest target points, weight them by a Tukey biweight of the residual (scale from
-    the median, clamped to [min_distance, max_distance]), and take one Gauss-Newton step on the
-    point-to-plane residuals plus ``point_weight`` times the point-to-point ones (which pins the
-    motion along flat faces).
+    view), match nearest target points within the current cut-off distance, weight them by a Tukey
+    biweight of the point-to-plane residual (scale from its median, at least ``min_distance``), and
+    take one Gauss-Newton step on the point-to-plane residuals plus ``point_weight`` times the
+    point-to-point ones (which keeps motion along flat faces from drifting freely).
     """
     tree = tree if tree is not None else cKDTree(target)
     T = T0.copy()
@@ -136,8 +136,8 @@ def icp(source: np.ndarray, target: np.ndarray, target_normals: np.ndarray, T0: 
         p = p - c   # twists about the centroid: better conditioned
         r_pl = np.einsum("ij,ij->i", diff, n)
         r_pt = np.linalg.norm(diff, axis=1)
-        scale = float(np.clip(1.4826 * np.median(r_pt) * 3.0, min_distance, max_distance))
-        w = tukey_weights(r_pt, 2.0 * scale)
+        scale = float(np.clip(4.685 * 1.4826 * np.median(np.abs(r_pl)), min_distance, max_distance))
+        w = tukey_weights(r_pl, scale)
         good = w > 0
         n_in = int(good.sum())
         if n_in < 6:
@@ -161,7 +161,7 @@ def icp(source: np.ndarray, target: np.ndarray, target_normals: np.ndarray, T0: 
             break
         C = make_transform(np.eye(3), c)
         T = C @ _se3_exp(xi) @ np.linalg.inv(C) @ T
-        cutoff = max(min(cutoff, 4.0 * scale), 2.0 * min_distance)
+        cutoff = max(min(cutoff, 2.0 * float(np.percentile(r_pt[good], 90))), 2.0 * min_distance)
         if np.linalg.norm(xi[:3]) < 1e-6 and np.linalg.norm(xi[3:]) < 1e-6 and it > 3:
             break
     return IcpResult(T, rms, n_in, n_in / max(len(source), 1))

@@ -1,0 +1,488 @@
+"""Joints from motion: the static splat and the interaction frames (the default proposal route).
+
+Steps (all in the world frame, metres):
+
+1. Interaction frames are grouped into fixed cameras (same pose and intrinsics). Each camera's
+   closed-state depth is its earliest frame when that frame is time 0 of the capture, else the
+   static splat rendered from it.
+2. Depth noise per camera comes from the median absolute difference between each step and the
+   closed state (most pixels do not move); the change threshold is a multiple of it.
+3. A static splat point that the closed-state view sees and that a later step sees *through*
+   (measured depth farther than the point by more than the threshold, or no object there) belongs
+   to a moving part: rigid scenes cannot reveal what was behind a surface. Such points are grouped
+   into parts by 3D connectivity and the step at which they first vanish.
+4. Each part is tracked through the steps: hypotheses (previous pose, constant velocity, and at
+   the part's first motion rotations about its box edges and slides along its normal) are scored
+   by projecting the part into the step's depth maps, the best ones refined by robust
+   point-to-plane ICP against the step's measured points.
+5. One revolute and one prismatic joint are fitted to all of the part's motions jointly
+   (core.rigid.fit_joint); the part is revolute if it turns. Joint values per step are ``states``,
+   the observed range is ``limit``. Extent, handle and confidence follow from the part's points.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from .cameras import Camera
+from .capture import Capture, Frame
+from .joints import Joint, rotation_about_axis
+from .progress import QUIET, Progress
+from .rigid import apply, fit_joint, icp, make_transform
+
+
+@dataclass
+class MotionConfig:
+    """Tuning of the motion route (defaults suit 2 mm-class depth noise)."""
+
+    noise_sigmas: float = 5.0         # change threshold = this many noise sigmas ...
+    min_threshold: float = 0.006      # ... but at least this (m)
+    min_opacity: float = 0.5          # splat points used as closed-state geometry
+    link_pixels: float = 3.0          # 3D connectivity radius, in static-point spacings
+    min_part_points: int = 40         # smaller groups of vanished points are noise
+    min_part_fraction: float = 0.01   # ... or smaller than this share of the splat points
+    track_points: int = 1200          # part points used for tracking
+    min_angle_deg: float = 5.0        # revolute when the part turns at least this much
+    icp_iterations: int = 30
+
+
+@dataclass
+class View:
+    """One fixed interaction camera: its depth per step, masks, and closed-state depth."""
+
+    name: str
+    camera: Camera
+    depth: dict[int, np.ndarray]
+    mask: dict[int, np.ndarray | None]
+    ref: np.ndarray
+    ref_source: str
+    threshold: float = 0.0
+    rays: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    ranges: dict[int | str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
+
+    def range_at(self, t: int | str) -> tuple[np.ndarray, np.ndarray]:
+        """Near and far depth of each pixel's surface at step ``t`` (``"ref"``: closed state), see
+        :func:`depth_range`; comparing a point's depth with this range tolerates grazing views."""
+        if t not in self.ranges:
+            self.ranges[t] = depth_range(self.ref if t == "ref" else self.depth[t])
+        return self.ranges[t]
+
+
+def depth_range(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel, the depth range its surface spans across the pixel: ``d -+ slack`` where the
+    slack is half the depth change to the neighbours on a smooth surface (both neighbours valid
+    and in line, per image direction); 0 where there is no object."""
+    slack = np.zeros_like(d)
+    pad = np.pad(d, 1, mode="edge")
+    for a, b in ((pad[1:-1, :-2], pad[1:-1, 2:]), (pad[:-2, 1:-1], pad[2:, 1:-1])):
+        smooth = (a > 0) & (b > 0) & (np.abs(a + b - 2 * d) < 0.02 * d + 0.25 * np.abs(b - a))
+        slack = np.maximum(slack, np.where(smooth, 0.5 * np.abs(b - a), 0.0))
+    valid = d > 0
+    return np.where(valid, d - slack, 0.0), np.where(valid, d + slack, 0.0)
+
+
+# --- views and thresholds ---------------------------------------------------------------------
+
+def group_views(frames: list[Frame]) -> list[list[Frame]]:
+    """Interaction frames grouped by fixed camera (same pose and intrinsics), each sorted by time."""
+    groups: list[list[Frame]] = []
+    for f in frames:
+        for g in groups:
+            c = g[0].camera
+            if (np.allclose(c.c2w, f.camera.c2w, atol=1e-6) and np.allclose(c.K, f.camera.K)
+                    and (c.width, c.height) == (f.camera.width, f.camera.height)):
+                g.append(f)
+                break
+        else:
+            groups.append([f])
+    return [sorted(g, key=lambda f: f.time) for g in groups]
+
+
+def make_views(capture: Capture, render_depth, config: MotionConfig) -> list[View]:
+    """Views of the interaction cameras; ``render_depth(camera) -> (H,W)`` gives the closed state
+    where a camera has no time-0 frame."""
+    t0 = min(capture.times)
+    views = []
+    for k, g in enumerate(group_views(capture.interaction)):
+        depth = {f.time: _depth(f) for f in g}
+        mask = {f.time: f.mask for f in g}
+        if g[0].time == t0:
+            ref, source = depth[t0], g[0].file_path
+        else:
+            ref, source = render_depth(g[0].camera).astype(np.float32), "splat"
+        v = View(f"cam{k}", g[0].camera, depth, mask, ref, source)
+        v.threshold = _threshold(v, config)
+        v.rays = g[0].camera.pixel_rays()
+        views.append(v)
+    return views
+
+
+def _depth(f: Frame) -> np.ndarray:
+    d = np.zeros(f.rgb.shape[:2], np.float32) if f.depth is None else np.nan_to_num(f.depth)
+    if f.mask is not None:
+        d = np.where(f.mask, d, 0.0).astype(np.float32)
+    return d
+
+
+def _threshold(v: View, config: MotionConfig) -> float:
+    """Change threshold of a view from the robust spread of its depth differences."""
+    diffs = []
+    for t, d in v.depth.items():
+        ok = (d > 0) & (v.ref > 0)
+        if ok.sum() > 20:
+            diffs.append(np.abs(d[ok] - v.ref[ok]))
+    if not diffs:
+        return config.min_threshold
+    sigma = 1.4826 * float(np.median(np.concatenate(diffs))) / math.sqrt(2.0)
+    return max(config.noise_sigmas * sigma, config.min_threshold)
+
+
+def _lookup(v: View, t: int | str, points: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Project world points into ``v`` at step ``t``: inside-image flags, their z-depth, and the
+    3x3 depth range (near, far) at their pixels (0 = no object there)."""
+    uv, z = v.camera.project(points)
+    lo_img, hi_img = v.range_at(t)
+    h, w = lo_img.shape
+    with np.errstate(invalid="ignore"):
+        j = np.floor(uv[:, 0]).astype(np.int64)
+        i = np.floor(uv[:, 1]).astype(np.int64)
+    inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
+    lo = np.zeros(len(points), np.float32)
+    hi = np.zeros(len(points), np.float32)
+    lo[inside] = lo_img[i[inside], j[inside]]
+    hi[inside] = hi_img[i[inside], j[inside]]
+    return inside, z, lo, hi
+
+
+# --- vanished points and parts ------------------------------------------------------------------
+
+def vanish_times(points: np.ndarray, views: list[View], times: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: first step at which a view sees through it (-1: never), and how many times."""
+    first = np.full(len(points), -1, np.int64)
+    count = np.zeros(len(points), np.int64)
+    for v in views:
+        inside, z, lo, hi = _lookup(v, "ref", points)
+        seen = inside & (lo > 0) & (z > lo - v.threshold) & (z < hi + v.threshold)
+        for t in times:
+            if t not in v.depth:
+                continue
+            _, _, d, _ = _lookup(v, t, points)
+            gone = seen & ((d - z > v.threshold) | (d <= 0) & (v.mask[t] is not None))
+            count += gone
+            new = gone & ((first < 0) | (first > t))
+            first[new] = t
+    return first, count
+
+
+def group_parts(points: np.ndarray, first: np.ndarray, radius: float, min_points: int
+                ) -> list[np.ndarray]:
+    """Index arrays of moving parts: connected vanished points that first vanish within one step
+    of their neighbours. Largest first."""
+    idx = np.flatnonzero(first >= 0)
+    if len(idx) == 0:
+        return []
+    pairs = cKDTree(points[idx]).query_pairs(radius, output_type="ndarray")
+    if len(pairs):
+        pairs = pairs[np.abs(first[idx[pairs[:, 0]]] - first[idx[pairs[:, 1]]]) <= 1]
+    n = len(idx)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) \
+        if len(pairs) else coo_matrix((n, n))
+    _, labels = connected_components(graph, directed=False)
+    parts = [idx[labels == lab] for lab in np.unique(labels)]
+    parts = [p for p in parts if len(p) >= min_points]
+    return sorted(parts, key=len, reverse=True)
+
+
+# --- measured points per step -------------------------------------------------------------------
+
+def step_cloud(views: list[View], t: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All views' measured points at step ``t``: points, unit normals (facing the camera), and
+    whether each point is in front of the closed state (moved in)."""
+    pts, nrm, moved = [], [], []
+    for v in views:
+        if t not in v.depth:
+            continue
+        d = v.depth[t]
+        P, N, ok = _grid_points(v, d)
+        sel = ok.reshape(-1)
+        pts.append(P.reshape(-1, 3)[sel])
+        nrm.append(N.reshape(-1, 3)[sel])
+        ahead = (d > 0) & ((v.ref <= 0) | (d < v.ref - v.threshold))
+        moved.append(ahead.reshape(-1)[sel])
+    if not pts:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, bool)
+    return np.concatenate(pts), np.concatenate(nrm), np.concatenate(moved)
+
+
+def _grid_points(v: View, d: np.ndarray, step: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World points (H,W,3) of a depth map, normals from neighbours ``step`` pixels away, valid."""
+    cam = v.rays * d[..., None]
+    c2w = np.linalg.inv(v.camera.w2c)
+    P = cam @ c2w[:3, :3].T + c2w[:3, 3]
+    du = np.zeros_like(P)
+    dv = np.zeros_like(P)
+    du[:, step:-step] = P[:, 2 * step:] - P[:, :-2 * step]
+    dv[step:-step] = P[2 * step:] - P[:-2 * step]
+    N = np.cross(du, dv)
+    n = np.linalg.norm(N, axis=-1, keepdims=True)
+    N = N / np.maximum(n, 1e-12)
+    towards = v.camera.center - P
+    N *= np.sign(np.sum(N * towards, axis=-1, keepdims=True) + 1e-12)
+    valid = d > 0
+    # normals only where the neighbourhood is one surface (no depth jumps)
+    dd = np.zeros_like(d)
+    for a, b in ((np.s_[:, step:-step], (np.s_[:, 2 * step:], np.s_[:, :-2 * step])),
+                 (np.s_[step:-step], (np.s_[2 * step:], np.s_[:-2 * step]))):
+        jump = np.maximum(np.abs(d[b[0]] - d[a]), np.abs(d[b[1]] - d[a]))
+        jump = np.where((d[b[0]] > 0) & (d[b[1]] > 0), jump, np.inf)
+        dd[a] = np.maximum(dd[a], jump)
+    dd[:, :step] = dd[:, -step:] = dd[:step] = dd[-step:] = np.inf
+    ok = valid & (n[..., 0] > 0) & (dd < 0.05 * np.maximum(d, 1e-3))
+    return P, N, ok
+
+
+# --- tracking ---------------------------------------------------------------------------------
+
+def projective_score(points: np.ndarray, views: list[View], t: int) -> tuple[float, np.ndarray]:
+    """Agreement of part points placed at step ``t`` with the depth maps: matched minus
+    contradicting (in front of a measured surface, or over a pixel showing no object) per point;
+    also the per-point "not hidden" flags (visible in some view)."""
+    matched = np.zeros(len(points), bool)
+    wrong = np.zeros(len(points), bool)
+    for v in views:
+        if t not in v.depth:
+            continue
+        inside, z, lo, hi = _lookup(v, t, points)
+        has = inside & (lo > 0)
+        matched |= has & (z > lo - v.threshold) & (z < hi + v.threshold)
+        wrong |= (has & (z < lo - v.threshold)) | (inside & (lo <= 0) & (v.mask[t] is not None))
+    wrong &= ~matched
+    return float(matched.sum() - wrong.sum()) / max(len(points), 1), matched | wrong
+
+
+def _visible(views: list[View], t: int):
+    def keep(points: np.ndarray) -> np.ndarray:
+        ok = np.zeros(len(points), bool)
+        for v in views:
+            if t not in v.depth:
+                continue
+            inside, z, _, hi = _lookup(v, t, points)
+            ok |= inside & ((hi <= 0) | (z - hi < v.threshold))
+        return ok
+    return keep
+
+
+def box_of(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Oriented box (centre, axes rows thinnest first, half sizes) by PCA, robust percentiles."""
+    c = np.median(points, axis=0)
+    _, _, Vt = np.linalg.svd(points - c, full_matrices=False)
+    axes = Vt[::-1].copy()
+    local = (points - c) @ axes.T
+    lo, hi = np.percentile(local, 1, axis=0), np.percentile(local, 99, axis=0)
+    center = c + ((lo + hi) / 2) @ axes
+    return center, axes, (hi - lo) / 2
+
+
+def first_move_hypotheses(points: np.ndarray) -> list[np.ndarray]:
+    """Plausible first motions of a panel-like part: turns about its box edges, slides along its
+    thinnest axis."""
+    c, axes, half = box_of(points)
+    hyps = []
+    for k_dir, k_off in ((1, 2), (2, 1)):
+        for s in (-1.0, 1.0):
+            p = c + s * half[k_off] * axes[k_off]
+            for ang in (8.0, 16.0, 25.0, 35.0, 50.0):
+                for sign in (-1.0, 1.0):
+                    R = rotation_about_axis(axes[k_dir], math.radians(sign * ang))
+                    hyps.append(make_transform(R, p - R @ p))
+    for dist in (0.02, 0.04, 0.07, 0.1, 0.14, 0.2):
+        for sign in (-1.0, 1.0):
+            hyps.append(make_transform(np.eye(3), sign * dist * axes[0]))
+    return hyps
+
+
+@dataclass
+class Track:
+    """A part's pose per step (closed -> step) with per-step quality."""
+
+    transforms: dict[int, np.ndarray]
+    score: dict[int, float]
+    rms: dict[int, float]
+
+
+def track_part(points: np.ndarray, views: list[View], times: list[int], start: int,
+               clouds: dict[int, tuple[np.ndarray, np.ndarray, cKDTree]], config: MotionConfig
+               ) -> Track:
+    """Poses of a part (closed-state ``points``) at every step; identity before ``start``."""
+    thr = float(np.median([v.threshold for v in views]))
+    Ts: dict[int, np.ndarray] = {}
+    score: dict[int, float] = {}
+    rms: dict[int, float] = {}
+    prev: list[np.ndarray] = []
+    for t in times:
+        if t < start:
+            Ts[t], score[t], rms[t] = np.eye(4), 1.0, 0.0
+            prev.append(np.eye(4))
+            continue
+        base = prev[-1] if prev else np.eye(4)
+        hyps = [base]
+        if len(prev) >= 2:
+            hyps.append(base @ np.linalg.inv(prev[-2]) @ base)
+        if t == start or (len(prev) >= 2 and np.allclose(prev[-1], prev[-2], atol=1e-3)):
+            hyps += [H @ base for H in first_move_hypotheses(apply(base, points))]
+        scored = sorted(hyps, key=lambda H: -projective_score(apply(H, points), views, t)[0])
+        P, N, tree = clouds[t]
+        best = None
+        for H in scored[:5]:
+            res = icp(points, P, N, H, tree=tree, max_distance=max(0.05, 4 * thr),
+                      min_distance=thr / 2, iterations=config.icp_iterations,
+                      keep=_visible(views, t))
+            s, _ = projective_score(apply(res.T, points), views, t)
+            if best is None or s > best[0]:
+                best = (s, res)
+        s, res = best
+        Ts[t], score[t], rms[t] = res.T, s, res.rms
+        prev.append(res.T)
+    return Track(Ts, score, rms)
+
+
+# --- the route --------------------------------------------------------------------------------
+
+def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.ndarray,
+                   render_depth, progress: Progress = QUIET,
+                   config: MotionConfig | None = None) -> tuple[list[Joint], dict[str, Any]]:
+    """Joints of the parts that move in ``capture``'s interaction frames.
+
+    ``splat_means`` (N,3) and ``splat_opacity`` (N,) (0..1) are the static splat's Gaussians;
+    ``render_depth(camera) -> (H,W)`` renders the splat's depth (used only for cameras without a
+    time-0 frame). Returns the joints (source ``motion``) and meta with per-part diagnostics.
+    """
+    cfg = config or MotionConfig()
+    times = capture.times
+    progress.update("propose", 0.02, "closed state per interaction camera")
+    views = make_views(capture, render_depth, cfg)
+    pts = np.asarray(splat_means, float)[np.asarray(splat_opacity) >= cfg.min_opacity]
+    spacing = float(np.median(cKDTree(pts).query(pts, k=2)[0][:, 1])) if len(pts) > 1 else 0.01
+    first, count = vanish_times(pts, views, times)
+    first[count < 2] = -1
+    min_points = max(cfg.min_part_points, int(cfg.min_part_fraction * len(pts)))
+    parts = group_parts(pts, first, cfg.link_pixels * spacing, min_points)
+    progress.update("propose", 0.1, f"{len(parts)} moving part(s)", parts=len(parts))
+
+    clouds = {}
+    for t in times:
+        P, N, moved = step_cloud(views, t)
+        clouds[t] = (P, N, cKDTree(P), moved)
+    rng = np.random.default_rng(0)
+    joints: list[Joint] = []
+    diagnostics = []
+    for k, idx in enumerate(parts):
+        S = pts[idx]
+        St = S[rng.choice(len(S), cfg.track_points, replace=False)] if len(S) > cfg.track_points else S
+        start = int(np.min(first[idx]))
+        track = track_part(St, views, times, start, {t: c[:3] for t, c in clouds.items()}, cfg)
+        moving = [t for t in times if t >= start]
+        weights = np.array([max(track.score[t], 0.05) for t in moving])
+        fit = fit_joint(St, [track.transforms[t] for t in moving], cfg.min_angle_deg, weights)
+        values = {t: 0.0 for t in times if t < start}
+        values.update({t: float(v) for t, v in zip(moving, fit.values)})
+        joint = _make_joint(k, fit, values, moving, S, track, views, clouds)
+        joints.append(joint)
+        diagnostics.append({"name": joint.name, "points": int(len(S)), "first_step": start,
+                            "rms_revolute_mm": 1000 * fit.rms_revolute,
+                            "rms_prismatic_mm": 1000 * fit.rms_prismatic,
+                            "max_angle_deg": fit.max_angle_deg,
+                            "score_min": float(min(track.score[t] for t in moving)),
+                            "icp_rms_mm": 1000 * float(np.median([track.rms[t] for t in moving]))})
+        progress.update("propose", 0.1 + 0.9 * (k + 1) / len(parts), f"part {k + 1}: {joint.type}")
+    meta = {"method": "motion",
+            "view": views[0].ref_source if views else None,
+            "cameras": [{"name": v.name, "closed_state": v.ref_source,
+                         "threshold_mm": 1000 * v.threshold} for v in views],
+            "motion": diagnostics}
+    return joints, meta
+
+
+def _make_joint(k: int, fit, values: dict[int, float], moving: list[int], S: np.ndarray,
+                track: Track, views: list[View], clouds) -> Joint:
+    """A proposal from a joint fit: limits, extent, handle, bbox and confidence."""
+    lo, hi = min(0.0, min(values.values())), max(0.0, max(values.values()))
+    part = _part_points(S, fit, track, clouds)
+    cam_centre = np.mean([v.camera.center for v in views], axis=0)
+    c, axes, half = box_of(part)
+    facing = (cam_centre - c) @ axes.T
+    n = axes[int(np.argmax(np.abs(facing) / np.linalg.norm(cam_centre - c)))]
+    n = n * np.sign(n @ (cam_centre - c))
+    if fit.type == "prismatic":
+        n = fit.axis.copy()
+        u = axes[0] - (axes[0] @ n) * n if abs(axes[0] @ n) < 0.9 else axes[1] - (axes[1] @ n) * n
+        u /= np.linalg.norm(u)
+        box_axes = np.stack([n, u, np.cross(n, u)])
+    else:
+        a = fit.axis
+        n = n - (n @ a) * a
+        n /= np.linalg.norm(n)
+        box_axes = np.stack([a, n, np.cross(a, n)])
+    local = (part - c) @ box_axes.T
+    blo, bhi = np.percentile(local, 0.5, axis=0), np.percentile(local, 99.5, axis=0)
+    centre = c + ((blo + bhi) / 2) @ box_axes
+    extent = {"center": [float(x) for x in centre], "axes": [[float(x) for x in r] for r in box_axes],
+              "half_size": [float(x) for x in (bhi - blo) / 2]}
+    # handle: the front of the part, farthest from the axis (revolute) / its middle (prismatic)
+    front = S[(S - centre) @ n >= np.percentile((S - centre) @ n, 90)]
+    if fit.type == "revolute":
+        rel = front - fit.origin
+        dist = np.linalg.norm(rel - np.outer(rel @ fit.axis, fit.axis), axis=1)
+        hp = front[np.argsort(dist)[int(0.97 * (len(front) - 1))]]
+    else:
+        hp = front.mean(axis=0)
+    handle = {"point": [float(x) for x in hp], "approach": [float(x) for x in -n]}
+    v0 = views[0]
+    uv, _ = v0.camera.project(_corners(centre, box_axes, (bhi - blo) / 2))
+    bbox = [float(np.clip(uv[:, 0].min(), 0, v0.camera.width)), float(np.clip(uv[:, 1].min(), 0, v0.camera.height)),
+            float(np.clip(uv[:, 0].max(), 0, v0.camera.width)), float(np.clip(uv[:, 1].max(), 0, v0.camera.height))]
+    quality = float(np.clip(np.median([track.score[t] for t in moving]), 0.0, 1.0))
+    thr = float(np.median([v.threshold for v in views]))
+    rms = fit.rms_revolute if fit.type == "revolute" else fit.rms_prismatic
+    confidence = round(quality * math.exp(-rms / (2 * thr)), 3)
+    name = f"{fit.type}_{k}"
+    return Joint(name=name, type=fit.type, axis=fit.axis,
+                 origin=fit.origin if fit.type == "revolute" else centre,
+                 limit=(lo, hi), states=values, source="motion", confidence=confidence,
+                 bbox=bbox, handle=handle, extent=extent)
+
+
+def _corners(c: np.ndarray, axes: np.ndarray, half: np.ndarray) -> np.ndarray:
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+    return c + (signs * half) @ axes
+
+
+def _part_points(S: np.ndarray, fit, track: Track, clouds) -> np.ndarray:
+    """The part in the closed state: its vanished splat points plus the measured points that moved
+    in with it (e.g. a drawer's sides), mapped back to the closed state."""
+    extra = []
+    c, axes, half = box_of(S)
+    for t, T in track.transforms.items():
+        P, _, _, moved = clouds[t]
+        if np.allclose(T, np.eye(4), atol=1e-4) or not moved.any():
+            continue
+        back = apply(np.linalg.inv(T), P[moved])
+        local = (back - c) @ axes.T
+        margin = 0.02
+        inside = np.all(np.abs(local[:, 1:]) <= half[1:] + margin, axis=1)
+        if fit.type == "prismatic":
+            travel = max(abs(v) for v in fit.values) if len(fit.values) else 0.0
+            depth = (back - c) @ fit.axis
+            inside &= (depth <= half[0] + margin) & (depth >= -travel - margin)
+        else:
+            inside &= np.abs(local[:, 0]) <= half[0] + margin
+        extra.append(back[inside])
+    return np.concatenate([S] + extra) if extra else S
