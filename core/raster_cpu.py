@@ -1,4 +1,9 @@
-"""CPU compositing backend: the numba kernels of core/raster_kernels.py as a torch.autograd.Function."""
+"""CPU backend: numba projection + compositing (core/raster_project_kernels.py,
+core/raster_kernels.py) as one torch.autograd.Function with hand-written backward.
+
+All kernel arrays are float32 and contiguous (one compiled specialisation per kernel); inputs
+of other dtypes are converted and gradients are returned in the inputs' dtype and device.
+"""
 
 from __future__ import annotations
 
@@ -7,49 +12,83 @@ import numpy as np
 import torch
 
 from . import raster_kernels as rk
+from . import raster_project_kernels as pk
 
-TILE = 16
+
+def _f32(t: torch.Tensor) -> np.ndarray:
+    return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float32)
 
 
-class _Composite(torch.autograd.Function):
-    """feats (M,10) float32, depth-sorted -> colour sum (H,W,3), depth sum (H,W), alpha (H,W)."""
+@numba.njit(parallel=True, cache=True)
+def _sum_to_rows(grads, order, out):
+    """out[order[m]] = sum over threads of grads[:, m] (out pre-zeroed)."""
+    for m in numba.prange(grads.shape[1]):
+        for f in range(grads.shape[2]):
+            s = np.float32(0.0)
+            for t in range(grads.shape[0]):
+                s += grads[t, m, f]
+            out[order[m], f] = s
+
+
+class _RasterizeCPU(torch.autograd.Function):
+    """(means, quats, log_scales, opacity_logits, colors) -> colour sum (H,W,3) without
+    background, alpha-weighted depth sum (H,W), alpha (H,W)."""
 
     @staticmethod
-    def forward(ctx, feats: torch.Tensor, extent: np.ndarray, width: int, height: int):
-        f = np.ascontiguousarray(feats.detach().cpu().numpy(), dtype=np.float32)
-        offsets, ids = rk.bin_tiles(f, extent, width, height, TILE)
+    def forward(ctx, means, quats, log_scales, opacity_logits, colors, cam, width, height, near):
+        arrays = [_f32(t) for t in (means, quats, log_scales, opacity_logits, colors)]
+        n = arrays[0].shape[0]
+        proj = np.empty((n, rk.NF), np.float32)
+        extent = np.empty((n, 2), np.float32)
+        visible = np.empty(n, np.bool_)
+        pk.project_forward(*arrays, cam, width, height, np.float32(near), proj, extent, visible)
+        vis = np.flatnonzero(visible)
+        order = vis[np.argsort(proj[vis, 9], kind="stable")]
+        feats = np.ascontiguousarray(proj[order])
+        offsets, ids = rk.bin_tiles(feats, np.ascontiguousarray(extent[order]), width, height)
         out_c = np.empty((height, width, 3), np.float32)
         out_d = np.empty((height, width), np.float32)
         out_a = np.empty((height, width), np.float32)
         out_n = np.empty((height, width), np.int32)
-        rk.blend_forward(f, offsets, ids, width, height, TILE, out_c, out_d, out_a, out_n)
-        ctx.saved = (f, offsets, ids, out_a, out_n, width, height)
-        ctx.device = feats.device
-        return tuple(torch.from_numpy(a).to(feats.device) for a in (out_c, out_d, out_a))
+        rk.blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n)
+        ctx.saved = (arrays, cam, width, height, proj, visible, order, feats, offsets, ids,
+                     out_a, out_n)
+        ctx.like = (means, quats, log_scales, opacity_logits, colors)
+        dtype, device = means.dtype, means.device
+        return tuple(torch.from_numpy(a).to(device=device, dtype=dtype)
+                     for a in (out_c, out_d, out_a))
 
     @staticmethod
     def backward(ctx, g_c, g_d, g_a):
-        f, offsets, ids, out_a, out_n, width, height = ctx.saved
-        grads = np.zeros((numba.get_num_threads(), f.shape[0], rk.NF), np.float32)
+        (arrays, cam, width, height, proj, visible, order, feats, offsets, ids,
+         out_a, out_n) = ctx.saved
+        grads = np.zeros((numba.get_num_threads(), feats.shape[0], rk.NF), np.float32)
+        rk.blend_backward(feats, offsets, ids, width, height, out_a, out_n,
+                          _grad(g_c, (height, width, 3)), _grad(g_d, (height, width)),
+                          _grad(g_a, (height, width)), grads)
+        g_proj = np.zeros_like(proj)
+        _sum_to_rows(grads, order.astype(np.int64), g_proj)
+        outs = [np.empty_like(a) for a in arrays]
+        means, quats, log_scales = arrays[:3]
+        pk.project_backward(means, quats, log_scales, cam, width, height, proj, visible, g_proj,
+                            *outs)
+        result = [torch.from_numpy(g).to(device=t.device, dtype=t.dtype)
+                  for g, t in zip(outs, ctx.like)]
+        return (*result, None, None, None, None)
 
-        def arr(g, shape):
-            if g is None:
-                return np.zeros(shape, np.float32)
-            return np.ascontiguousarray(g.detach().cpu().numpy(), dtype=np.float32)
-        rk.blend_backward(f, offsets, ids, width, height, TILE, out_a, out_n,
-                          arr(g_c, (height, width, 3)), arr(g_d, (height, width)),
-                          arr(g_a, (height, width)), grads)
-        out = np.empty((f.shape[0], rk.NF), np.float32)
-        rk.sum_threads(grads, out)
-        return torch.from_numpy(out).to(ctx.device), None, None, None
+
+def _grad(g: torch.Tensor | None, shape) -> np.ndarray:
+    return np.zeros(shape, np.float32) if g is None else _f32(g)
 
 
-def composite_cpu(means2d, conics, opacities, colors, depths, extent, order, width, height):
-    """Blend the Gaussians ``order`` (front to back) with the numba kernels (autograd-aware).
+def camera_array(K: torch.Tensor, w2c: torch.Tensor) -> np.ndarray:
+    """The kernels' float32 camera vector [fx, fy, cx, cy, R row-major (9), t (3)]."""
+    K, w2c = K.detach().cpu().double().numpy(), w2c.detach().cpu().double().numpy()
+    return np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], w2c[:3, :3].ravel(),
+                           w2c[:3, 3]]).astype(np.float32)
 
-    Returns the colour sum without background (H,W,3), alpha-weighted depth sum (H,W) and
-    alpha (H,W), in the dtype of ``means2d`` (the kernels compute in float32)."""
-    feats = torch.cat([means2d[order], conics[order], opacities[order, None], colors[order],
-                       depths[order, None]], dim=1).to(torch.float32)
-    ext = np.ascontiguousarray(extent[order].detach().cpu().numpy(), dtype=np.float32)
-    return tuple(o.to(means2d.dtype) for o in _Composite.apply(feats, ext, width, height))
+
+def rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K, w2c, width, height, near):
+    """Colour sum without background (H,W,3), alpha-weighted depth sum (H,W), alpha (H,W)."""
+    return _RasterizeCPU.apply(means, quats, log_scales, opacity_logits, colors,
+                               camera_array(K, w2c), int(width), int(height), float(near))

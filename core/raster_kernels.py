@@ -4,6 +4,13 @@ Inputs are float32 arrays of the visible Gaussians already in front-to-back orde
 ``feats`` (M, 10) is ``mean_x, mean_y, conic_a, conic_b, conic_c, opacity, r, g, b, depth``.
 Binning keeps that order inside every tile list (count, prefix sum, fill), so no per-tile sort.
 The model is the one of core/raster_reference.py (its docstring lists the rules).
+
+The blend loops run Gaussian-outer, pixel-inner over the 64 pixels of an 8x8 tile, branch-free
+(selects instead of branches, a polynomial exp), so LLVM vectorises them. A pixel that reaches
+the transmittance limit stores its transmittance negated (= done). The backward pass walks each
+tile's list back to front from the last contributor of any of its pixels and recovers every
+pixel's transmittance before a Gaussian from the final one; per-Gaussian sums go to per-thread
+buffers (no atomics).
 """
 
 from __future__ import annotations
@@ -13,33 +20,50 @@ import numpy as np
 from numba import njit, prange
 
 NF = 10  # floats per Gaussian in ``feats`` and its gradient
-POWER_CUTOFF = np.float32(4.5)
-ALPHA_MIN = np.float32(1.0 / 255.0)
-ALPHA_MAX = np.float32(0.99)
-T_MIN = np.float32(1e-4)
+TILE = 8
+NPIX = TILE * TILE
+f32 = np.float32
+POWER_CUTOFF = f32(4.5)
+ALPHA_MIN = f32(1.0 / 255.0)
+ALPHA_MAX = f32(0.99)
+T_MIN = f32(1e-4)
+_ZERO, _HALF, _ONE = f32(0.0), f32(0.5), f32(1.0)
+_EXP_C = (f32(1.0 / 16.0), f32(1.0), f32(1.0 / 2), f32(1.0 / 6), f32(1.0 / 24), f32(1.0 / 120),
+          f32(1.0 / 720))
+
+
+@njit(inline="always", fastmath=True)
+def exp_neg(x):
+    """exp(-x) for x <= 4.5 (larger x is treated as 4.5), relative error < 3e-6; vectorisable."""
+    y = -min(x, POWER_CUTOFF) * _EXP_C[0]
+    p = _EXP_C[1] + y * (_EXP_C[1] + y * (_EXP_C[2] + y * (_EXP_C[3] + y * (
+        _EXP_C[4] + y * (_EXP_C[5] + y * _EXP_C[6])))))
+    p = p * p
+    p = p * p
+    p = p * p
+    return p * p
 
 
 @njit(cache=True)
-def bin_tiles(feats, extent, width, height, tile):
+def bin_tiles(feats, extent, width, height):
     """Tile lists: ``offsets`` (tiles+1) and Gaussian ids (depth order kept inside each tile)."""
-    tiles_x = (width + tile - 1) // tile
-    tiles_y = (height + tile - 1) // tile
+    tiles_x = (width + TILE - 1) // TILE
+    tiles_y = (height + TILE - 1) // TILE
     m = feats.shape[0]
     rect = np.empty((m, 4), np.int32)
     counts = np.zeros(tiles_x * tiles_y + 1, np.int64)
     for g in range(m):
-        ex = extent[g, 0] * np.float32(1.0001) + np.float32(1e-3)
-        ey = extent[g, 1] * np.float32(1.0001) + np.float32(1e-3)
-        j0 = max(int(np.ceil(feats[g, 0] - ex - 0.5)), 0)
-        j1 = min(int(np.floor(feats[g, 0] + ex - 0.5)), width - 1)
-        i0 = max(int(np.ceil(feats[g, 1] - ey - 0.5)), 0)
-        i1 = min(int(np.floor(feats[g, 1] + ey - 0.5)), height - 1)
+        ex = extent[g, 0] * f32(1.0001) + f32(1e-3)
+        ey = extent[g, 1] * f32(1.0001) + f32(1e-3)
+        j0 = max(int(np.ceil(feats[g, 0] - ex - _HALF)), 0)
+        j1 = min(int(np.floor(feats[g, 0] + ex - _HALF)), width - 1)
+        i0 = max(int(np.ceil(feats[g, 1] - ey - _HALF)), 0)
+        i1 = min(int(np.floor(feats[g, 1] + ey - _HALF)), height - 1)
         if j0 > j1 or i0 > i1:
-            rect[g, 0] = 1
-            rect[g, 1] = 0
+            rect[g, 0], rect[g, 1] = 1, 0
             continue
-        rect[g, 0], rect[g, 1] = j0 // tile, j1 // tile
-        rect[g, 2], rect[g, 3] = i0 // tile, i1 // tile
+        rect[g, 0], rect[g, 1] = j0 // TILE, j1 // TILE
+        rect[g, 2], rect[g, 3] = i0 // TILE, i1 // TILE
         for ty in range(rect[g, 2], rect[g, 3] + 1):
             for tx in range(rect[g, 0], rect[g, 1] + 1):
                 counts[ty * tiles_x + tx + 1] += 1
@@ -57,107 +81,137 @@ def bin_tiles(feats, extent, width, height, tile):
     return offsets, ids
 
 
-@njit(inline="always", fastmath=True)
-def _alpha(feats, g, px, py):
-    dx = px - feats[g, 0]
-    dy = py - feats[g, 1]
-    power = np.float32(0.5) * (feats[g, 2] * dx * dx + feats[g, 4] * dy * dy) \
-        + feats[g, 3] * dx * dy
-    if power > POWER_CUTOFF:
-        return np.float32(0.0), np.float32(0.0), dx, dy
-    gauss = np.exp(-power)
-    alpha = min(ALPHA_MAX, feats[g, 5] * gauss)
-    if alpha < ALPHA_MIN:
-        return np.float32(0.0), gauss, dx, dy
-    return alpha, gauss, dx, dy
-
-
 @njit(parallel=True, fastmath=True, cache=True)
-def blend_forward(feats, offsets, ids, width, height, tile, out_c, out_d, out_a, out_n):
-    """Front-to-back blend per pixel: colour sum, depth sum, alpha, and list entries used."""
-    tiles_x = (width + tile - 1) // tile
-    tiles_y = (height + tile - 1) // tile
+def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n):
+    """Front-to-back blend: colour sum (H,W,3), depth sum, alpha, and per pixel the number of
+    tile-list entries up to its last contributor."""
+    tiles_x = (width + TILE - 1) // TILE
+    tiles_y = (height + TILE - 1) // TILE
     for t in prange(tiles_x * tiles_y):
-        ty, tx = t // tiles_x, t % tiles_x
-        start, end = offsets[t], offsets[t + 1]
-        for i in range(ty * tile, min(ty * tile + tile, height)):
-            py = np.float32(i + 0.5)
-            for j in range(tx * tile, min(tx * tile + tile, width)):
-                px = np.float32(j + 0.5)
-                T = np.float32(1.0)
-                r = gr = b = d = np.float32(0.0)
-                last = start
-                for k in range(start, end):
-                    g = ids[k]
-                    alpha, gauss, dx, dy = _alpha(feats, g, px, py)
-                    if alpha == 0.0:
-                        continue
-                    next_T = T * (np.float32(1.0) - alpha)
-                    if next_T < T_MIN:
-                        break
-                    w = alpha * T
-                    r += w * feats[g, 6]
-                    gr += w * feats[g, 7]
-                    b += w * feats[g, 8]
-                    d += w * feats[g, 9]
-                    T = next_T
-                    last = k + 1
-                out_c[i, j, 0], out_c[i, j, 1], out_c[i, j, 2] = r, gr, b
-                out_d[i, j] = d
-                out_a[i, j] = np.float32(1.0) - T
-                out_n[i, j] = last - start
+        i0, j0 = (t // tiles_x) * TILE, (t % tiles_x) * TILE
+        px = np.empty(NPIX, np.float32)
+        py = np.empty(NPIX, np.float32)
+        T = np.empty(NPIX, np.float32)
+        acc = np.zeros((4, NPIX), np.float32)
+        last = np.zeros(NPIX, np.int32)
+        done = 0
+        for p in range(NPIX):
+            i, j = i0 + p // TILE, j0 + p % TILE
+            px[p], py[p] = f32(j + 0.5), f32(i + 0.5)
+            inside = i < height and j < width
+            T[p] = _ONE if inside else -_ONE
+            done += 0 if inside else 1
+        start = offsets[t]
+        for k in range(start, offsets[t + 1]):
+            if done == NPIX:
+                break
+            g = ids[k]
+            mx, my, ca, cb, cc = feats[g, 0], feats[g, 1], feats[g, 2], feats[g, 3], feats[g, 4]
+            op, cr, cg, cbl, dep = feats[g, 5], feats[g, 6], feats[g, 7], feats[g, 8], feats[g, 9]
+            kk = np.int32(k - start + 1)
+            stops = 0
+            for p in range(NPIX):
+                dx = px[p] - mx
+                dy = py[p] - my
+                power = _HALF * (ca * dx * dx + cc * dy * dy) + cb * dx * dy
+                alpha = min(ALPHA_MAX, op * exp_neg(power))
+                Tp = T[p]
+                next_T = Tp * (_ONE - alpha)
+                valid = (power <= POWER_CUTOFF) & (alpha >= ALPHA_MIN) & (Tp > _ZERO)
+                stop = valid & (next_T < T_MIN)
+                take = valid & (next_T >= T_MIN)
+                w = alpha * Tp if take else _ZERO
+                acc[0, p] += w * cr
+                acc[1, p] += w * cg
+                acc[2, p] += w * cbl
+                acc[3, p] += w * dep
+                T[p] = next_T if take else (-Tp if stop else Tp)
+                last[p] = kk if take else last[p]
+                stops += 1 if stop else 0
+            done += stops
+        for p in range(NPIX):
+            i, j = i0 + p // TILE, j0 + p % TILE
+            if i < height and j < width:
+                out_c[i, j, 0], out_c[i, j, 1], out_c[i, j, 2] = acc[0, p], acc[1, p], acc[2, p]
+                out_d[i, j] = acc[3, p]
+                out_a[i, j] = _ONE - abs(T[p])
+                out_n[i, j] = last[p]
 
 
 @njit(parallel=True, fastmath=True, cache=True)
-def blend_backward(feats, offsets, ids, width, height, tile, out_a, out_n, g_c, g_d, g_a, grads):
-    """Gradients w.r.t. ``feats`` into per-thread buffers ``grads`` (threads, M, 10).
-
-    Each pixel walks its list back to front from its last contributor, recovering the
-    transmittance before each Gaussian from the final one."""
-    tiles_x = (width + tile - 1) // tile
-    tiles_y = (height + tile - 1) // tile
+def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g_a, grads):
+    """Gradients w.r.t. ``feats`` summed into per-thread buffers ``grads`` (threads, M, 10)."""
+    tiles_x = (width + TILE - 1) // TILE
+    tiles_y = (height + TILE - 1) // TILE
     for t in prange(tiles_x * tiles_y):
         buf = grads[numba.get_thread_id()]
-        ty, tx = t // tiles_x, t % tiles_x
+        i0, j0 = (t // tiles_x) * TILE, (t % tiles_x) * TILE
+        px = np.empty(NPIX, np.float32)
+        py = np.empty(NPIX, np.float32)
+        T = np.ones(NPIX, np.float32)
+        T_final = np.ones(NPIX, np.float32)
+        gpix = np.zeros((5, NPIX), np.float32)   # dL/d colour sum (3), depth sum, alpha
+        rest = np.zeros((4, NPIX), np.float32)   # colour/depth of what lies behind, normalised
+        last = np.zeros(NPIX, np.int32)
         start = offsets[t]
-        for i in range(ty * tile, min(ty * tile + tile, height)):
-            py = np.float32(i + 0.5)
-            for j in range(tx * tile, min(tx * tile + tile, width)):
-                px = np.float32(j + 0.5)
-                T_final = np.float32(1.0) - out_a[i, j]
-                T = T_final
-                gcr, gcg, gcb = g_c[i, j, 0], g_c[i, j, 1], g_c[i, j, 2]
-                gd, ga = g_d[i, j], g_a[i, j]
-                acc_r = acc_g = acc_b = acc_d = np.float32(0.0)
-                for k in range(start + out_n[i, j] - 1, start - 1, -1):
-                    g = ids[k]
-                    alpha, gauss, dx, dy = _alpha(feats, g, px, py)
-                    if alpha == 0.0:
-                        continue
-                    one_minus = np.float32(1.0) - alpha
-                    T = T / one_minus
-                    w = alpha * T
-                    cr, cg, cb, dep = feats[g, 6], feats[g, 7], feats[g, 8], feats[g, 9]
-                    buf[g, 6] += w * gcr
-                    buf[g, 7] += w * gcg
-                    buf[g, 8] += w * gcb
-                    buf[g, 9] += w * gd
-                    g_alpha = T * (gcr * (cr - acc_r) + gcg * (cg - acc_g) + gcb * (cb - acc_b)
-                                   + gd * (dep - acc_d)) + ga * T_final / one_minus
-                    acc_r = alpha * cr + one_minus * acc_r
-                    acc_g = alpha * cg + one_minus * acc_g
-                    acc_b = alpha * cb + one_minus * acc_b
-                    acc_d = alpha * dep + one_minus * acc_d
-                    op = feats[g, 5]
-                    if op * gauss > ALPHA_MAX:
-                        continue  # clamped alpha: no gradient to opacity or shape
-                    buf[g, 5] += gauss * g_alpha
-                    g_power = -op * gauss * g_alpha
-                    buf[g, 2] += np.float32(0.5) * dx * dx * g_power
-                    buf[g, 3] += dx * dy * g_power
-                    buf[g, 4] += np.float32(0.5) * dy * dy * g_power
-                    buf[g, 0] -= (feats[g, 2] * dx + feats[g, 3] * dy) * g_power
-                    buf[g, 1] -= (feats[g, 3] * dx + feats[g, 4] * dy) * g_power
+        k_end = 0
+        for p in range(NPIX):
+            i, j = i0 + p // TILE, j0 + p % TILE
+            px[p], py[p] = f32(j + 0.5), f32(i + 0.5)
+            if i < height and j < width:
+                T[p] = _ONE - out_a[i, j]
+                T_final[p] = T[p]
+                gpix[0, p], gpix[1, p], gpix[2, p] = g_c[i, j, 0], g_c[i, j, 1], g_c[i, j, 2]
+                gpix[3, p], gpix[4, p] = g_d[i, j], g_a[i, j]
+                last[p] = out_n[i, j]
+                k_end = max(k_end, out_n[i, j])
+        for kk in range(k_end - 1, -1, -1):
+            g = ids[start + kk]
+            mx, my, ca, cb, cc = feats[g, 0], feats[g, 1], feats[g, 2], feats[g, 3], feats[g, 4]
+            op, cr, cg, cbl, dep = feats[g, 5], feats[g, 6], feats[g, 7], feats[g, 8], feats[g, 9]
+            s_mx = s_my = s_ca = s_cb = s_cc = s_op = s_r = s_g = s_b = s_d = _ZERO
+            for p in range(NPIX):
+                dx = px[p] - mx
+                dy = py[p] - my
+                power = _HALF * (ca * dx * dx + cc * dy * dy) + cb * dx * dy
+                gauss = exp_neg(power)
+                raw = op * gauss
+                alpha = min(ALPHA_MAX, raw)
+                valid = (kk < last[p]) & (power <= POWER_CUTOFF) & (alpha >= ALPHA_MIN)
+                one_minus = _ONE - alpha
+                Tb = T[p] / one_minus
+                w = alpha * Tb if valid else _ZERO
+                gr, gg, gb, gd = gpix[0, p], gpix[1, p], gpix[2, p], gpix[3, p]
+                s_r += w * gr
+                s_g += w * gg
+                s_b += w * gb
+                s_d += w * gd
+                g_alpha = Tb * (gr * (cr - rest[0, p]) + gg * (cg - rest[1, p])
+                                + gb * (cbl - rest[2, p]) + gd * (dep - rest[3, p])) \
+                    + gpix[4, p] * T_final[p] / one_minus
+                g_alpha = g_alpha if valid & (raw <= ALPHA_MAX) else _ZERO
+                s_op += gauss * g_alpha
+                g_power = -raw * g_alpha
+                s_ca += dx * dx * g_power
+                s_cb += dx * dy * g_power
+                s_cc += dy * dy * g_power
+                s_mx -= (ca * dx + cb * dy) * g_power
+                s_my -= (cb * dx + cc * dy) * g_power
+                T[p] = Tb if valid else T[p]
+                rest[0, p] = alpha * cr + one_minus * rest[0, p] if valid else rest[0, p]
+                rest[1, p] = alpha * cg + one_minus * rest[1, p] if valid else rest[1, p]
+                rest[2, p] = alpha * cbl + one_minus * rest[2, p] if valid else rest[2, p]
+                rest[3, p] = alpha * dep + one_minus * rest[3, p] if valid else rest[3, p]
+            buf[g, 0] += s_mx
+            buf[g, 1] += s_my
+            buf[g, 2] += _HALF * s_ca
+            buf[g, 3] += s_cb
+            buf[g, 4] += _HALF * s_cc
+            buf[g, 5] += s_op
+            buf[g, 6] += s_r
+            buf[g, 7] += s_g
+            buf[g, 8] += s_b
+            buf[g, 9] += s_d
 
 
 @njit(parallel=True, cache=True)
@@ -165,7 +219,7 @@ def sum_threads(grads, out):
     """out = grads.sum(axis=0), parallel over Gaussians."""
     for g in prange(grads.shape[1]):
         for f in range(grads.shape[2]):
-            s = np.float32(0.0)
+            s = _ZERO
             for t in range(grads.shape[0]):
                 s += grads[t, g, f]
             out[g, f] = s

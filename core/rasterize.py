@@ -1,10 +1,10 @@
 """Differentiable Gaussian splat rasterizer: ``rasterize`` (raw tensors) and ``render`` (a camera).
 
-Pipeline: EWA projection and SH colours in vectorised torch (autograd), a single depth sort of
-the visible Gaussians, then front-to-back alpha compositing by one of the backends:
+Pipeline: SH colours in torch (autograd), EWA projection, a single depth sort of the visible
+Gaussians, then front-to-back alpha compositing, by one of the backends:
 
-- ``"cpu"``: numba kernels (core/raster_kernels.py) with hand-written backward, wrapped in a
-  torch.autograd.Function;
+- ``"cpu"``: numba kernels for projection and compositing with hand-written backward, wrapped in
+  a torch.autograd.Function (core/raster_cpu.py);
 - ``"reference"``: dense pure-torch compositing (core/raster_reference.py), slow, for tests;
 - ``"gsplat"``: gsplat's CUDA rasterizer (only when CUDA and gsplat are importable);
 - ``"auto"``: gsplat for CUDA tensors when available, else ``"cpu"``.
@@ -56,21 +56,20 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor
         depth = torch.where(alpha > ALPHA_EPS, depth, torch.zeros_like(depth))
         return RenderOutput(rgb, depth, alpha)
 
-    proj = project(means, quats, log_scales, K, w2c, width, height, near)
     cam_center = -w2c[:3, :3].T @ w2c[:3, 3]
     colors = eval_sh_colors(sh, means, cam_center)
-    opacities = torch.sigmoid(opacity_logits)
-    with torch.no_grad():
-        vis = torch.nonzero(proj.visible).squeeze(1)
-        order = vis[torch.argsort(proj.depths[vis], stable=True)]
-
     if backend == "reference":
-        rgb, dsum, alpha = composite_reference(proj.means2d, proj.conics, opacities, colors,
-                                               proj.depths, proj.extent, order, width, height, bg)
+        proj = project(means, quats, log_scales, K, w2c, width, height, near)
+        with torch.no_grad():
+            vis = torch.nonzero(proj.visible).squeeze(1)
+            order = vis[torch.argsort(proj.depths[vis], stable=True)]
+        rgb, dsum, alpha = composite_reference(proj.means2d, proj.conics,
+                                               torch.sigmoid(opacity_logits), colors, proj.depths,
+                                               proj.extent, order, width, height, bg)
     else:
-        from .raster_cpu import composite_cpu
-        csum, dsum, alpha = composite_cpu(proj.means2d, proj.conics, opacities, colors,
-                                          proj.depths, proj.extent, order, width, height)
+        from .raster_cpu import rasterize_cpu
+        csum, dsum, alpha = rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K,
+                                          w2c, width, height, near)
         rgb = csum + (1.0 - alpha)[..., None] * bg
     valid = alpha > ALPHA_EPS
     depth = torch.where(valid, dsum / torch.where(valid, alpha, torch.ones_like(alpha)),

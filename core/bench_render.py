@@ -1,0 +1,164 @@
+"""``artgs bench-render``: rasterizer speed on a synthetic shell of Gaussians.
+
+Scene (fixed seed): N Gaussians on a sphere of radius 0.5 m centred 1.5 m in front of the camera;
+focal 1.2 W, principal point at the image centre; scales log-normal (sigma 0.3) around 0.6x the
+mean point spacing; random rotations; opacities uniform in [0.1, 0.9]; random colours as SH
+degree 0. Timings are medians after warm-up with 2 torch and 2 numba threads; "fwd" is the
+forward pass with autograd recording, "fwd+bwd" adds the backward of a weighted sum of rgb,
+depth and alpha. Pairs = Gaussian-pixel pairs actually blended.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+
+import numba
+import numpy as np
+import torch
+from numba import njit
+
+from . import raster_kernels as rk
+from .raster_project import project
+from .rasterize import rasterize
+from .sh import rgb_to_sh0
+
+THREADS = 2
+AUTOGRAD_BUDGET_BYTES = 3e9  # the reference's fwd+bwd is skipped above this estimate
+
+
+def shell_scene(n: int, size: int, seed: int = 0):
+    """(params list, K, w2c) of the benchmark scene at ``size`` x ``size`` pixels."""
+    g = torch.Generator().manual_seed(seed)
+    radius, centre = 0.5, torch.tensor([0.0, 0.0, 1.5])
+    d = torch.randn(n, 3, generator=g)
+    means = centre + radius * d / d.norm(dim=1, keepdim=True)
+    spacing = math.sqrt(4 * math.pi * radius ** 2 / n)
+    log_scales = math.log(0.6 * spacing) + 0.3 * torch.randn(n, 3, generator=g)
+    quats = torch.randn(n, 4, generator=g)
+    quats = quats / quats.norm(dim=1, keepdim=True)
+    op = 0.1 + 0.8 * torch.rand(n, generator=g)
+    sh = rgb_to_sh0(torch.rand(n, 3, generator=g))[:, None, :]
+    K = np.array([[1.2 * size, 0.0, size / 2], [0.0, 1.2 * size, size / 2], [0.0, 0.0, 1.0]])
+    return [means, quats, log_scales, torch.log(op / (1 - op)), sh], K, np.eye(4)
+
+
+@njit(cache=True)
+def _count_pairs(feats, offsets, ids, width, height):
+    """Gaussian-pixel pairs blended by the forward kernel (same rules)."""
+    tile = rk.TILE
+    tiles_x = (width + tile - 1) // tile
+    total = 0
+    for t in range(len(offsets) - 1):
+        ty, tx = t // tiles_x, t % tiles_x
+        for i in range(ty * tile, min(ty * tile + tile, height)):
+            for j in range(tx * tile, min(tx * tile + tile, width)):
+                T = np.float32(1.0)
+                for k in range(offsets[t], offsets[t + 1]):
+                    g = ids[k]
+                    dx, dy = np.float32(j + 0.5) - feats[g, 0], np.float32(i + 0.5) - feats[g, 1]
+                    power = 0.5 * (feats[g, 2] * dx * dx + feats[g, 4] * dy * dy) \
+                        + feats[g, 3] * dx * dy
+                    alpha = min(rk.ALPHA_MAX, feats[g, 5] * rk.exp_neg(power))
+                    if power > rk.POWER_CUTOFF or alpha < rk.ALPHA_MIN:
+                        continue
+                    if T * (np.float32(1.0) - alpha) < rk.T_MIN:
+                        break
+                    T *= np.float32(1.0) - alpha
+                    total += 1
+    return total
+
+
+def blended_pairs(params, K, w2c, size) -> tuple[int, int]:
+    """(blended pairs, pixels inside 3 sigma boxes of tile lists) for the scene."""
+    with torch.no_grad():
+        Kt, wt = torch.as_tensor(K, dtype=torch.float32), torch.as_tensor(w2c, dtype=torch.float32)
+        proj = project(params[0], params[1], params[2], Kt, wt, size, size)
+        vis = torch.nonzero(proj.visible).squeeze(1)
+        order = vis[torch.argsort(proj.depths[vis], stable=True)]
+        feats = torch.cat([proj.means2d[order], proj.conics[order],
+                           torch.sigmoid(params[3][order, None]), torch.zeros(len(order), 3),
+                           proj.depths[order, None]], 1).numpy()
+        ext = np.ascontiguousarray(proj.extent[order].numpy())
+    offsets, ids = rk.bin_tiles(np.ascontiguousarray(feats), ext, size, size)
+    return int(_count_pairs(feats, offsets, ids, size, size)), int(offsets[-1])
+
+
+def _time(fn, runs: int, warmup: int = 2) -> float:
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+def _reference_memory(params, K, w2c, size) -> float:
+    """Rough autograd memory of the reference at this size (bytes): ~12 float32 per block entry."""
+    from .raster_project import as_tensor
+    with torch.no_grad():
+        p = project(params[0], params[1], params[2], as_tensor(K, params[0]),
+                    as_tensor(w2c, params[0]), size, size)
+        m, e = p.means2d[p.visible], p.extent[p.visible]
+        blocks = math.ceil(size / 16)
+        lo = ((m - e) / 16).floor().clamp(0, blocks - 1)
+        hi = ((m + e) / 16).floor().clamp(0, blocks - 1)
+        n_block_pairs = float(((hi - lo + 1).prod(dim=1)).sum())
+    return n_block_pairs * 256 * 12 * 4
+
+
+def bench_one(size: int, n: int, backend: str, runs: int, grad: bool) -> float:
+    """Median ms of the forward (grad=False) or forward+backward (grad=True) pass."""
+    params, K, w2c = shell_scene(n, size)
+    ps = [p.clone().requires_grad_(True) for p in params]
+    g = torch.Generator().manual_seed(1)
+    wc = torch.rand(size, size, 3, generator=g)
+
+    def step():
+        out = rasterize(*ps, K, w2c, size, size, background=[0.0, 0.0, 0.0], backend=backend)
+        if grad:
+            loss = (out.rgb * wc).sum() + out.depth.sum() + out.alpha.sum()
+            loss.backward()
+            for p in ps:
+                p.grad = None
+    return _time(step, runs)
+
+
+def bench_render_command(args, progress) -> int:
+    """Print forward / forward+backward timings of the CPU kernels and the reference."""
+    torch.set_num_threads(THREADS)
+    numba.set_num_threads(min(THREADS, numba.config.NUMBA_NUM_THREADS))
+    say = print if progress.mode == "text" else (lambda *a, **k: None)
+    say(f"bench-render: shell scene, SH degree 0, threads torch={torch.get_num_threads()} "
+        f"numba={numba.get_num_threads()}, median of {args.runs} runs after 2 warm-up runs")
+    say(f"{'size':>8} {'N':>7} {'pairs':>9} {'backend':>10} {'fwd ms':>9} {'fwd+bwd ms':>11} "
+        f"{'pairs/s fwd':>12} {'pairs/s f+b':>12}")
+    results = []
+    cases = [(s, n) for s in args.sizes for n in args.counts]
+    for idx, (size, n) in enumerate(cases):
+        params, K, w2c = shell_scene(n, size)
+        pairs, _ = blended_pairs(params, K, w2c, size)
+        rows = [("cpu", args.runs, "")]
+        if not args.no_reference:
+            runs = max(3, args.runs // 5)
+            mem = _reference_memory(params, K, w2c, size)
+            note = (f"skipped (autograd needs ~{mem / 1e9:.1f} GB)"
+                    if mem > AUTOGRAD_BUDGET_BYTES else "")
+            rows.append(("reference", runs, note))
+        for backend, runs, note in rows:
+            progress.update("bench-render", idx / len(cases), f"{size}^2 N={n} {backend}")
+            fwd = bench_one(size, n, backend, runs, grad=False)
+            both = None if note else bench_one(size, n, backend, runs, grad=True)
+            res = {"size": size, "n": n, "pairs": pairs, "backend": backend, "runs": runs,
+                   "fwd_ms": round(fwd, 2), "fwd_bwd_ms": None if both is None else round(both, 2)}
+            results.append(res)
+            both_s = f"{both:11.1f}" if both is not None else f"{'-':>11}"
+            rate_b = f"{pairs / both * 1e3:12.3g}" if both is not None else f"{'-':>12}"
+            say(f"{size:>6}^2 {n:>7} {pairs:>9} {backend:>10} {fwd:9.1f} {both_s} "
+                f"{pairs / fwd * 1e3:12.3g} {rate_b}"
+                + (f"  ({runs} runs)" if runs != args.runs else "") + (f"  fwd+bwd {note}" if note else ""))
+    progress.finished(results=results)
+    return 0
