@@ -132,11 +132,18 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
     while name in taken:
         n += 1
         name = f"{base}_{n}"
+    ext = lift.extent(camera, part.bbox, plane)
+    geometry = np.concatenate([axis, origin, np.ravel(ext["axes"]), ext["center"], ext["half_size"]])
+    if not np.all(np.isfinite(geometry)):
+        reason = f"part {part.index} ({part.label}): degenerate geometry from its box {_r(part.bbox)}"
+        progress.log(f"VLM answer skipped: {reason}", "warning")
+        skipped.append(reason)
+        return None
     confidence = plane.coverage * (1.0 if trusted else 0.6)
     return Joint(name=name, type=part.joint_type, axis=axis, origin=origin, limit=limit,
                  source="vlm", confidence=round(float(min(max(confidence, 0.0), 1.0)), 3),
                  bbox=[round(float(v), 2) for v in part.bbox], handle=handle,
-                 extent=lift.extent(camera, part.bbox, plane),
+                 extent=ext,
                  extra={"label": part.label} | ({"joint_points": part.joint_points.round(2).tolist()}
                                                 if part.joint_points is not None else {}))
 

@@ -221,8 +221,11 @@ def _part_from_json(index: int, item: dict) -> tuple[PartAnswer, list[_Coords]]:
 # --- parts from free text --------------------------------------------------------------------
 
 def _segments(text: str) -> list[tuple[int, str]]:
-    """Per-part pieces of a text answer: split at "Part N" or, failing that, at each <ref>."""
+    """Per-part pieces of a text answer: split at "Part N", else at numbered list items, else at
+    each <ref>."""
     marks = list(re.finditer(r"\bpart\s*(?:#|no\.?\s*)?(\d+)\b", text, re.I))
+    if not marks:  # a numbered list: "1. door ..." / "2) drawer ..."
+        marks = list(re.finditer(r"^\s*[-*]?\s*(\d+)[.):]\s", text, re.M))
     if marks:
         return [(int(m.group(1)), text[m.start():(marks[k + 1].start() if k + 1 < len(marks)
                                                    else len(text))])
@@ -238,7 +241,7 @@ def _part_from_text(index: int, segment: str) -> tuple[PartAnswer, list[_Coords]
     part = PartAnswer(index)
     low = segment.lower()
     ref = re.search(r"<ref>(.*?)</ref>", segment, re.I | re.S)
-    name = re.search(r"\bis (?:an? |the )?([a-z][a-z \-]*?)(?=,|\.|;| and\b| with\b| whose\b|$)",
+    name = re.search(r"\bis (?:an? |the )?([a-z][a-z \-]*?)(?=,|\.|;|\(| and\b| with\b| whose\b| that\b| which\b|$)",
                      re.sub(r"<[^>]*>", " ", low))
     if ref and ref.group(1).strip():
         part.label = _clean_label(ref.group(1))
@@ -255,7 +258,7 @@ def _part_from_text(index: int, segment: str) -> tuple[PartAnswer, list[_Coords]
     groups = _groups(segment)
     joint_kw = [m.start() for m in re.finditer(r"joint param\w*|joint\s+(?:axis|line|points?)|"
                                                 r"\baxis\b|\bhinge line\b", low)]
-    box_kw = [m.start() for m in re.finditer(r"bounding box|\bbbox\b|\bbox is\b|\blocated at\b",
+    box_kw = [m.start() for m in re.finditer(r"bounding box|\bbbox\b|(?<![</])\bbox\b(?!>)|\blocated at\b",
                                               low)]
     for k, g in enumerate(groups):
         last_joint = max((p for p in joint_kw if p < g.pos), default=-1)

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from artgs.core.cameras import Camera, intrinsics, look_at
+from artgs.core.capture import Capture
 from artgs.core.errors import ArtgsError, InputError
 from artgs.core import lift
 from artgs.core.vlm_client import VlmConfig, chat, user_message, vlm_config
@@ -445,6 +446,12 @@ def test_propose_vlm_end_to_end_recovers_the_ground_truth_joints(cabinet):
     # the view looks at the front: against the object's front normal (object x = gt drawer axis)
     front = next(j for j in gt if j.type == "prismatic").axis
     assert _deg(camera.forward * [1, 1, 0], -front * [1, 1, 0]) < 3.0
+    uv, z = camera.project(gaussians.means.numpy().astype(float))
+    assert np.all(z > 0) and np.mean((uv >= 0).all(1) & (uv <= [W, H]).all(1)) > 0.99
+    # without interaction frames the static views' side is used: the same face
+    static_only = frontal_camera(Capture(capture.root, capture.static),
+                                 gaussians.means.numpy().astype(float), W, H)
+    assert _deg(static_only.forward * [1, 1, 0], -front * [1, 1, 0]) < 3.0
     with FakeVlm(_canned_answers(camera, gt)) as fake:
         stream = io.StringIO()
         joints, meta = propose_vlm(capture, gaussians, Progress("json", stream=stream),
@@ -488,3 +495,14 @@ def test_propose_vlm_skips_an_unparseable_part_and_keeps_the_others(cabinet):
     events = [json.loads(line) for line in stream.getvalue().splitlines()]
     warnings = [e["message"] for e in events if e["event"] == "log" and e["level"] == "warning"]
     assert any(f"part {broken}" in w and "no bounding box" in w for w in warnings)
+
+
+def test_numbered_lists_and_labels_with_clauses():
+    text = ("1. The left part is a door that swings open (revolute); joint [[10, 10, 10, 110]], "
+            "bounding box [[10, 10, 80, 110]]\n"
+            "2. Part is a drawer which slides out; axis [[120, 60, 120, 62]], box [[90, 40, 150, 80]]")
+    a, b = parse_parts(text, W, H, "pixels")
+    assert (a.label, a.joint_type, a.skip) == ("door", "revolute", None)
+    assert (b.label, b.joint_type, b.skip) == ("drawer", "prismatic", None)
+    np.testing.assert_allclose(a.joint_points, [[10, 10], [10, 110]])
+    np.testing.assert_allclose(b.bbox, [90, 40, 150, 80])
