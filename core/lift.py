@@ -73,19 +73,26 @@ def robust_depth(depth: np.ndarray, uv: np.ndarray, radius: int = 2) -> np.ndarr
     return np.nan_to_num(out)
 
 
+def box_pixels(depth: np.ndarray, box: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Centres (M,2) and depths (M,) of the pixels in ``box`` with valid depth, and their share."""
+    x1, y1, x2, y2 = np.asarray(box, float)
+    h, w = depth.shape
+    c0, c1 = int(np.clip(np.floor(x1), 0, w - 1)), int(np.clip(np.ceil(x2), 1, w))
+    r0, r1 = int(np.clip(np.floor(y1), 0, h - 1)), int(np.clip(np.ceil(y2), 1, h))
+    sub = depth[r0:r1, c0:c1]
+    jj, ii = np.meshgrid(np.arange(c0, c1) + 0.5, np.arange(r0, r1) + 0.5)
+    valid = np.isfinite(sub) & (sub > 0)
+    return np.stack([jj[valid], ii[valid]], axis=1), sub[valid], float(valid.mean()) if valid.size else 0.0
+
+
 def fit_plane(camera: Camera, depth: np.ndarray, box: np.ndarray) -> Plane | None:
     """The part's front plane from the depth inside ``box`` (x1, y1, x2, y2 pixels), or None."""
     x1, y1, x2, y2 = np.asarray(box, float)
     dx, dy = _SHRINK * (x2 - x1), _SHRINK * (y2 - y1)
-    h, w = depth.shape
-    c0, c1 = int(np.clip(np.floor(x1 + dx), 0, w - 1)), int(np.clip(np.ceil(x2 - dx), 1, w))
-    r0, r1 = int(np.clip(np.floor(y1 + dy), 0, h - 1)), int(np.clip(np.ceil(y2 - dy), 1, h))
-    sub = depth[r0:r1, c0:c1]
-    jj, ii = np.meshgrid(np.arange(c0, c1) + 0.5, np.arange(r0, r1) + 0.5)
-    valid = np.isfinite(sub) & (sub > 0)
-    if valid.sum() < 6:
+    uv, z, coverage = box_pixels(depth, np.array([x1 + dx, y1 + dy, x2 - dx, y2 - dy]))
+    if len(z) < 6:
         return None
-    pts = backproject_uv(camera, np.stack([jj[valid], ii[valid]], axis=1), sub[valid])
+    pts = backproject_uv(camera, uv, z)
     keep = np.ones(len(pts), bool)
     for _ in range(3):
         center = pts[keep].mean(axis=0)
@@ -97,7 +104,7 @@ def fit_plane(camera: Camera, depth: np.ndarray, box: np.ndarray) -> Plane | Non
             return None
     if normal @ (camera.center - center) < 0:
         normal = -normal
-    return Plane(center, normal, int(keep.sum()), float(valid.mean()))
+    return Plane(center, normal, int(keep.sum()), coverage)
 
 
 def on_plane(camera: Camera, uv: np.ndarray, plane: Plane) -> np.ndarray:
@@ -173,19 +180,14 @@ def extent(camera: Camera, box: np.ndarray, plane: Plane) -> dict[str, list]:
 def handle(camera: Camera, depth: np.ndarray, box: np.ndarray, plane: Plane
            ) -> dict[str, list[float]] | None:
     """Grasp point (3D centre of the handle's pixels) and approach (minus the part's normal)."""
-    x1, y1, x2, y2 = np.asarray(box, float)
-    h, w = depth.shape
-    c0, c1 = int(np.clip(np.floor(x1), 0, w - 1)), int(np.clip(np.ceil(x2), 1, w))
-    r0, r1 = int(np.clip(np.floor(y1), 0, h - 1)), int(np.clip(np.ceil(y2), 1, h))
-    sub = depth[r0:r1, c0:c1]
-    jj, ii = np.meshgrid(np.arange(c0, c1) + 0.5, np.arange(r0, r1) + 0.5)
-    valid = np.isfinite(sub) & (sub > 0)
-    if valid.any():
-        pts = backproject_uv(camera, np.stack([jj[valid], ii[valid]], axis=1), sub[valid])
+    uv, z, _ = box_pixels(depth, box)
+    if len(z):
+        pts = backproject_uv(camera, uv, z)
         height = (pts - plane.point) @ plane.normal
         proud = pts[(height > 0.005) & (height < FRONT_MARGIN)]
         point = np.median(proud if len(proud) >= 3 else pts, axis=0)
     else:
+        x1, y1, x2, y2 = np.asarray(box, float)
         point = on_plane(camera, np.array([[(x1 + x2) / 2, (y1 + y2) / 2]]), plane)[0]
     return {"point": [float(x) for x in point], "approach": [float(x) for x in -plane.normal]}
 

@@ -92,8 +92,7 @@ def propose_vlm(capture: Capture, gaussians: Gaussians, progress: Progress, conf
             if joint is not None:
                 joints.append(joint)
         else:
-            progress.log(f"VLM answer skipped: {part.skip}", "warning")
-            meta["skipped"].append(part.skip)
+            _skip(progress, meta["skipped"], part.skip)
     if not joints:
         progress.log(f"the VLM gave no usable part ({len(usable)} of {len(parts)} answers "
                      "parsed)", "warning")
@@ -107,10 +106,8 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
     """One parsed part lifted to a joint; None (reason logged and appended) if it cannot be."""
     plane = lift.fit_plane(camera, depth, part.bbox)
     if plane is None:
-        reason = f"part {part.index} ({part.label}): no rendered depth inside its box {_r(part.bbox)}"
-        progress.log(f"VLM answer skipped: {reason}", "warning")
-        skipped.append(reason)
-        return None
+        return _skip(progress, skipped, f"part {part.index} ({part.label}): no rendered depth "
+                     f"inside its box {_r(part.bbox)}")
     center, _, _, size = lift.box_frame(camera, part.bbox, plane)
     trusted = True
     if part.joint_type == "revolute":
@@ -135,10 +132,8 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
     ext = lift.extent(camera, part.bbox, plane)
     geometry = np.concatenate([axis, origin, np.ravel(ext["axes"]), ext["center"], ext["half_size"]])
     if not np.all(np.isfinite(geometry)):
-        reason = f"part {part.index} ({part.label}): degenerate geometry from its box {_r(part.bbox)}"
-        progress.log(f"VLM answer skipped: {reason}", "warning")
-        skipped.append(reason)
-        return None
+        return _skip(progress, skipped, f"part {part.index} ({part.label}): degenerate geometry "
+                     f"from its box {_r(part.bbox)}")
     confidence = plane.coverage * (1.0 if trusted else 0.6)
     return Joint(name=name, type=part.joint_type, axis=axis, origin=origin, limit=limit,
                  source="vlm", confidence=round(float(min(max(confidence, 0.0), 1.0)), 3),
@@ -215,6 +210,12 @@ def png_bytes(rgb: np.ndarray) -> bytes:
     if not ok:
         raise ValueError("PNG encoding failed")
     return buf.tobytes()
+
+
+def _skip(progress: Progress, skipped: list[str], reason: str) -> None:
+    """Log why a part's answer is not used and record it in the proposal's ``skipped`` list."""
+    progress.log(f"VLM answer skipped: {reason}", "warning")
+    skipped.append(reason)
 
 
 def _r(box: np.ndarray) -> list[float]:
