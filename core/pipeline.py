@@ -1,0 +1,63 @@
+"""``artgs run CAPTURE --out OUT``: every stage that exists, in order, on one capture.
+
+validate -> reconstruct -> propose. Until an optimisation stage exists the proposals are also
+written as ``articulation.json`` so the whole output contract can be exercised end to end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from . import outdir
+from .capture import load_capture
+from .errors import InputError
+from .joints import Articulation, read_articulation, write_articulation
+from .progress import Progress
+
+
+def run(capture_dir: Path, out: Path, progress: Progress, *, method: str = "motion",
+        iterations: int | None = None, device: str = "auto", vlm=None) -> Articulation:
+    """Run the pipeline; returns the articulation written to ``out``."""
+    from .propose import propose
+    from .reconstruct import reconstruct
+
+    start = time.perf_counter()
+    progress.start("validate")
+    capture = load_capture(capture_dir)
+    if not capture.interaction:
+        raise InputError(capture_dir / "transforms.json", "no interaction frames: joints can only "
+                         "be found from frames with phase 'interaction'", field="frames")
+    out.mkdir(parents=True, exist_ok=True)
+    outdir.update_report(out, capture=str(capture_dir.resolve()))
+    progress.finish("validate", frames=len(capture.frames), interaction=len(capture.interaction))
+
+    reconstruct(capture, out, progress, iterations=iterations, device=device)
+    proposals = propose(capture, out, progress, method=method, device=device, vlm=vlm)
+
+    articulation = Articulation(proposals.joints, {"source": outdir.PROPOSALS, **proposals.meta})
+    write_articulation(out / outdir.ARTICULATION, articulation)
+    outdir.update_report(out, "run", seconds=time.perf_counter() - start,
+                         joints=len(articulation.joints))
+    return read_articulation(out / outdir.ARTICULATION)
+
+
+def run_command(args: argparse.Namespace, progress: Progress) -> int:
+    """``artgs run``."""
+    vlm = None
+    if args.method == "vlm":
+        from .vlm_client import vlm_config
+
+        vlm = vlm_config(args.vlm_endpoint, args.vlm_model, args.vlm_timeout)
+    out = Path(args.out)
+    articulation = run(Path(args.capture), out, progress, method=args.method,
+                       iterations=args.iterations, device=args.device, vlm=vlm)
+    progress.finished(out=str(out), joints=[j.name for j in articulation.joints],
+                      files=sorted(p.name for p in out.iterdir() if not p.name.startswith(".")))
+    if progress.mode == "text":
+        for j in articulation.joints:
+            print(f"{j.name}: {j.type} axis={j.axis.round(3).tolist()} "
+                  f"origin={j.origin.round(3).tolist()} limit={list(j.limit)}")
+        print(f"outputs in {out}")
+    return 0
