@@ -23,7 +23,7 @@ Steps (all in the world frame, metres):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -33,9 +33,9 @@ from scipy.spatial import cKDTree
 
 from .cameras import Camera
 from .capture import Capture, Frame
-from .joints import Joint, rotation_about_axis
+from .joints import Joint, joint_transform, rotation_about_axis
 from .progress import QUIET, Progress
-from .rigid import apply, fit_joint, icp, make_transform
+from .rigid import StepData, apply, tukey_weights, fit_joint, icp, make_transform, refine_joint
 
 
 @dataclass
@@ -51,6 +51,8 @@ class MotionConfig:
     track_points: int = 1200          # part points used for tracking
     min_angle_deg: float = 5.0        # revolute when the part turns at least this much
     icp_iterations: int = 30
+    refine_rounds: int = 1            # joint refinements on the measurements (part re-gathered)
+    snap_deg: float = 25.0            # a slide this close to the front's normal is taken along it
 
 
 @dataclass
@@ -392,6 +394,16 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
         moving = [t for t in times if t >= start]
         weights = np.array([max(track.score[t], 0.05) for t in moving])
         fit = fit_joint(St, [track.transforms[t] for t in moving], cfg.min_angle_deg, weights)
+        steps = [StepData(*clouds[t][:3], _visible(views, t)) for t in moving]
+        thr = float(np.median([v.threshold for v in views]))
+        for _ in range(cfg.refine_rounds):
+            X = _part_points(S, fit, _fit_transforms(fit, moving), clouds)
+            X = X[rng.choice(len(X), 2 * cfg.track_points, replace=False)] \
+                if len(X) > 2 * cfg.track_points else X
+            fit = refine_joint(fit, X, steps, min_distance=thr / 2, max_distance=max(0.05, 4 * thr))
+        snapped = None
+        if fit.type == "prismatic":
+            fit, snapped = _snap_to_front(fit, S, cfg.snap_deg)
         values = {t: 0.0 for t in times if t < start}
         values.update({t: float(v) for t, v in zip(moving, fit.values)})
         joint = _make_joint(k, fit, values, moving, S, track, views, clouds)
@@ -400,6 +412,7 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
                             "rms_revolute_mm": 1000 * fit.rms_revolute,
                             "rms_prismatic_mm": 1000 * fit.rms_prismatic,
                             "max_angle_deg": fit.max_angle_deg,
+                            "snapped_to_front_deg": snapped,
                             "score_min": float(min(track.score[t] for t in moving)),
                             "icp_rms_mm": 1000 * float(np.median([track.rms[t] for t in moving]))})
         progress.update("propose", 0.1 + 0.9 * (k + 1) / len(parts), f"part {k + 1}: {joint.type}")
@@ -415,7 +428,7 @@ def _make_joint(k: int, fit, values: dict[int, float], moving: list[int], S: np.
                 track: Track, views: list[View], clouds) -> Joint:
     """A proposal from a joint fit: limits, extent, handle, bbox and confidence."""
     lo, hi = min(0.0, min(values.values())), max(0.0, max(values.values()))
-    part = _part_points(S, fit, track, clouds)
+    part = _part_points(S, fit, _fit_transforms(fit, moving), clouds)
     cam_centre = np.mean([v.camera.center for v in views], axis=0)
     c, axes, half = box_of(part)
     facing = (cam_centre - c) @ axes.T
@@ -465,12 +478,46 @@ def _corners(c: np.ndarray, axes: np.ndarray, half: np.ndarray) -> np.ndarray:
     return c + (signs * half) @ axes
 
 
-def _part_points(S: np.ndarray, fit, track: Track, clouds) -> np.ndarray:
+def plane_normal(points: np.ndarray, iterations: int = 10) -> np.ndarray:
+    """Unit normal of the dominant plane of ``points`` (PCA reweighted by a Tukey biweight)."""
+    w = np.ones(len(points))
+    n = np.array([0.0, 0.0, 1.0])
+    for _ in range(iterations):
+        c = (w @ points) / w.sum()
+        _, vecs = np.linalg.eigh(((points - c) * w[:, None]).T @ (points - c))
+        n = vecs[:, 0]
+        r = (points - c) @ n
+        w = tukey_weights(r, max(4.685 * 1.4826 * float(np.median(np.abs(r))), 1e-4))
+        if w.sum() < 10:
+            break
+    return n
+
+
+def _snap_to_front(fit, S: np.ndarray, max_deg: float):
+    """A prismatic part slides along its front's normal when the measured slide is within
+    ``max_deg`` of it (drawer runners are square to the front). A flat front pins the slide only
+    along its normal, so its sideways drift is poorly measured; the front's plane fit over hundreds
+    of points is not. Returns the fit and the correction in degrees (None if not snapped)."""
+    n = plane_normal(S)
+    n = n if n @ fit.axis >= 0 else -n
+    angle = math.degrees(math.acos(float(np.clip(n @ fit.axis, -1.0, 1.0))))
+    if angle > max_deg:
+        return fit, None
+    values = fit.values * float(n @ fit.axis)
+    return replace(fit, axis=n, values=values), round(angle, 3)
+
+
+def _fit_transforms(fit, times: list[int]) -> dict[int, np.ndarray]:
+    """The fitted joint's motion (closed -> step) at each of ``times``."""
+    return {t: joint_transform(fit.type, fit.axis, fit.origin, v) for t, v in zip(times, fit.values)}
+
+
+def _part_points(S: np.ndarray, fit, transforms: dict[int, np.ndarray], clouds) -> np.ndarray:
     """The part in the closed state: its vanished splat points plus the measured points that moved
     in with it (e.g. a drawer's sides), mapped back to the closed state."""
     extra = []
     c, axes, half = box_of(S)
-    for t, T in track.transforms.items():
+    for t, T in transforms.items():
         P, _, _, moved = clouds[t]
         if np.allclose(T, np.eye(4), atol=1e-4) or not moved.any():
             continue

@@ -288,3 +288,87 @@ def _refine_revolute(X: np.ndarray, Ys: list[np.ndarray], a: np.ndarray, p: np.n
     c = X.mean(axis=0)
     pt = pt + ((c - pt) @ ax) * ax
     return ax, pt, sol.x[4:]
+
+
+@dataclass
+class StepData:
+    """Measured points of one step for :func:`refine_joint`: points, unit normals, KD-tree and an
+    optional visibility filter of model points."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    tree: cKDTree
+    keep: Callable[[np.ndarray], np.ndarray] | None = None
+
+
+def refine_joint(fit: JointFit, points: np.ndarray, steps: list[StepData], *, rounds: int = 4,
+                 min_distance: float = 0.003, max_distance: float = 0.05,
+                 point_weight: float = 0.02) -> JointFit:
+    """Refine a joint fit directly on the measurements: one axis for all steps.
+
+    ``points`` are part points in the closed state, ``steps[k]`` the measurements at the step of
+    ``fit.values[k]``. Each round matches the model-placed points to the nearest measured points
+    (Tukey weights on the point-to-plane residual), then solves the point-to-plane (plus
+    ``point_weight`` point-to-point) least squares for the axis (direction, and the line's
+    position for revolute joints) and every step's value together.
+    """
+    rev = fit.type == "revolute"
+    a0, p0 = fit.axis.copy(), fit.origin.copy()
+    u, v = _perp_basis(a0)
+    n_geo = 4 if rev else 2
+    x = np.concatenate([np.zeros(n_geo), fit.values])
+    cutoff = max_distance
+
+    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        a = a0 + x[0] * u + x[1] * v
+        a = a / np.linalg.norm(a)
+        p = p0 + (x[2] * u + x[3] * v if rev else 0.0)
+        return a, p
+
+    def place(x: np.ndarray, k: int, X: np.ndarray) -> np.ndarray:
+        a, p = unpack(x)
+        return _rotate(X, a, p, x[n_geo + k]) if rev else X + a * x[n_geo + k]
+
+    rms = math.inf
+    for _ in range(rounds):
+        matches = []
+        sq, wsum = 0.0, 0.0
+        for k, st in enumerate(steps):
+            Y = place(x, k, points)
+            ok = st.keep(Y) if st.keep is not None else np.ones(len(Y), bool)
+            d, j = st.tree.query(Y, distance_upper_bound=cutoff)
+            ok &= np.isfinite(d)
+            if ok.sum() < 6:
+                continue
+            q, n = st.points[j[ok]], st.normals[j[ok]]
+            r = np.einsum("ij,ij->i", Y[ok] - q, n)
+            scale = max(4.685 * 1.4826 * float(np.median(np.abs(r))), min_distance)
+            w = tukey_weights(r, scale)
+            sel = w > 0
+            matches.append((k, points[ok][sel], q[sel], n[sel], np.sqrt(w[sel])))
+            sq += float(np.sum(w * r * r))
+            wsum += float(w.sum())
+        if not matches:
+            break
+        rms = math.sqrt(sq / max(wsum, 1e-12))
+        pw = math.sqrt(point_weight)
+
+        def resid(x: np.ndarray) -> np.ndarray:
+            out = []
+            for k, X, q, n, sw in matches:
+                diff = place(x, k, X) - q
+                out.append(sw * np.einsum("ij,ij->i", diff, n))
+                out.append((pw * sw[:, None] * diff).ravel())
+            return np.concatenate(out)
+
+        x = least_squares(resid, x, method="trf", max_nfev=30, x_scale="jac").x
+        cutoff = max(cutoff / 2, 3 * min_distance)
+    a, p = unpack(x)
+    values = x[n_geo:]
+    if values.sum() < 0:
+        a, values = -a, -values
+    if rev:
+        c = points.mean(axis=0)
+        p = p + ((c - p) @ a) * a
+        return JointFit("revolute", a, p, values, rms, fit.rms_prismatic, fit.max_angle_deg)
+    return JointFit("prismatic", a, fit.origin, values, fit.rms_revolute, rms, fit.max_angle_deg)
