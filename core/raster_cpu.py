@@ -42,8 +42,7 @@ class _RasterizeCPU(torch.autograd.Function):
         extent = np.empty((n, 2), np.float32)
         visible = np.empty(n, np.bool_)
         pk.project_forward(*arrays, cam, width, height, np.float32(near), proj, extent, visible)
-        vis = np.flatnonzero(visible)
-        order = vis[np.argsort(proj[vis, 9], kind="stable")]
+        order = rk.depth_order(np.ascontiguousarray(proj[:, 9]), np.flatnonzero(visible))
         feats = np.ascontiguousarray(proj[order])
         offsets, ids = rk.bin_tiles(feats, np.ascontiguousarray(extent[order]), width, height)
         out_c = np.empty((height, width, 3), np.float32)
@@ -67,7 +66,7 @@ class _RasterizeCPU(torch.autograd.Function):
                           _grad(g_c, (height, width, 3)), _grad(g_d, (height, width)),
                           _grad(g_a, (height, width)), grads)
         g_proj = np.zeros_like(proj)
-        _sum_to_rows(grads, order.astype(np.int64), g_proj)
+        _sum_to_rows(grads, order, g_proj)
         outs = [np.empty_like(a) for a in arrays]
         means, quats, log_scales = arrays[:3]
         pk.project_backward(means, quats, log_scales, cam, width, height, proj, visible, g_proj,

@@ -45,6 +45,27 @@ def exp_neg(x):
 
 
 @njit(cache=True)
+def depth_order(depths, candidates):
+    """``candidates`` sorted by ``depths`` (all > 0), stable: LSD radix sort on the float bits."""
+    keys = depths.view(np.uint32)
+    order = candidates.copy()
+    other = np.empty_like(order)
+    for shift in range(0, 32, 8):
+        counts = np.zeros(257, np.int64)
+        for i in range(order.shape[0]):
+            counts[((keys[order[i]] >> shift) & 255) + 1] += 1
+        if counts.max() == order.shape[0]:
+            continue  # every key has the same byte here
+        pos = np.cumsum(counts)
+        for i in range(order.shape[0]):
+            b = (keys[order[i]] >> shift) & 255
+            other[pos[b]] = order[i]
+            pos[b] += 1
+        order, other = other, order
+    return order
+
+
+@njit(cache=True)
 def bin_tiles(feats, extent, width, height):
     """Tile lists: ``offsets`` (tiles+1) and Gaussian ids (depth order kept inside each tile)."""
     tiles_x = (width + TILE - 1) // TILE
@@ -179,7 +200,8 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
                 alpha = min(ALPHA_MAX, raw)
                 valid = (kk < last[p]) & (power <= POWER_CUTOFF) & (alpha >= ALPHA_MIN)
                 one_minus = _ONE - alpha
-                Tb = T[p] / one_minus
+                inv = _ONE / one_minus
+                Tb = T[p] * inv
                 w = alpha * Tb if valid else _ZERO
                 gr, gg, gb, gd = gpix[0, p], gpix[1, p], gpix[2, p], gpix[3, p]
                 s_r += w * gr
@@ -188,7 +210,7 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
                 s_d += w * gd
                 g_alpha = Tb * (gr * (cr - rest[0, p]) + gg * (cg - rest[1, p])
                                 + gb * (cbl - rest[2, p]) + gd * (dep - rest[3, p])) \
-                    + gpix[4, p] * T_final[p] / one_minus
+                    + gpix[4, p] * T_final[p] * inv
                 g_alpha = g_alpha if valid & (raw <= ALPHA_MAX) else _ZERO
                 s_op += gauss * g_alpha
                 g_power = -raw * g_alpha

@@ -18,19 +18,43 @@ _ZERO, _ONE, _TWO = f32(0.0), f32(1.0), f32(2.0)
 _FOV_PAD = f32(0.3)
 
 
-@njit(inline="always", fastmath=True)
+@njit(fastmath=True, cache=True)
 def _rotation(qw, qx, qy, qz):
-    """Normalised quaternion, its norm, and the rotation matrix rows."""
+    """Normalised quaternion, its norm, and the rotation matrix (row-major 9-tuple)."""
     norm = max(np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz), f32(1e-12))
     w, x, y, z = qw / norm, qx / norm, qy / norm, qz / norm
-    R = np.empty((3, 3), np.float32)
-    R[0, 0], R[0, 1], R[0, 2] = _ONE - _TWO * (y * y + z * z), _TWO * (x * y - w * z), _TWO * (x * z + w * y)
-    R[1, 0], R[1, 1], R[1, 2] = _TWO * (x * y + w * z), _ONE - _TWO * (x * x + z * z), _TWO * (y * z - w * x)
-    R[2, 0], R[2, 1], R[2, 2] = _TWO * (x * z - w * y), _TWO * (y * z + w * x), _ONE - _TWO * (x * x + y * y)
+    R = (_ONE - _TWO * (y * y + z * z), _TWO * (x * y - w * z), _TWO * (x * z + w * y),
+         _TWO * (x * y + w * z), _ONE - _TWO * (x * x + z * z), _TWO * (y * z - w * x),
+         _TWO * (x * z - w * y), _TWO * (y * z + w * x), _ONE - _TWO * (x * x + y * y))
     return w, x, y, z, norm, R
 
 
-@njit(inline="always", fastmath=True)
+@njit(fastmath=True, cache=True)
+def _column(cam, R, s, j, j00, j02, j11, j12):
+    """Column j of A = W R S (camera-frame) and of T = J A."""
+    m0, m1, m2 = R[j] * s, R[3 + j] * s, R[6 + j] * s
+    a0 = cam[4] * m0 + cam[5] * m1 + cam[6] * m2
+    a1 = cam[7] * m0 + cam[8] * m1 + cam[9] * m2
+    a2 = cam[10] * m0 + cam[11] * m1 + cam[12] * m2
+    return a0, a1, a2, j00 * a0 + j02 * a2, j11 * a1 + j12 * a2
+
+
+@njit(fastmath=True, cache=True)
+def _column_backward(cam, R, s, j, j00, j02, j11, j12, g_a, g_b, g_c):
+    """Backward of column j: gradients of R[:, j], log_scale j and the Jacobian entries."""
+    a0, a1, a2, t0, t1 = _column(cam, R, s, j, j00, j02, j11, j12)
+    gt0 = _TWO * g_a * t0 + g_b * t1
+    gt1 = g_b * t0 + _TWO * g_c * t1
+    ga0, ga1, ga2 = j00 * gt0, j11 * gt1, j02 * gt0 + j12 * gt1
+    gm0 = cam[4] * ga0 + cam[7] * ga1 + cam[10] * ga2
+    gm1 = cam[5] * ga0 + cam[8] * ga1 + cam[11] * ga2
+    gm2 = cam[6] * ga0 + cam[9] * ga1 + cam[12] * ga2
+    g_ls = (gm0 * R[j] + gm1 * R[3 + j] + gm2 * R[6 + j]) * s
+    return (gm0 * s, gm1 * s, gm2 * s, g_ls,
+            gt0 * a0, gt0 * a2, gt1 * a1, gt1 * a2)
+
+
+@njit(fastmath=True, cache=True)
 def _limits(cam, width, height):
     fx, fy, cx, cy = cam[0], cam[1], cam[2], cam[3]
     tan_x, tan_y = f32(0.5) * width / fx, f32(0.5) * height / fy
@@ -61,13 +85,7 @@ def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width
         j11, j12 = fy / z, -fy * tyc / (z * z)
         a = b = c = _ZERO
         for j in range(3):
-            s = np.exp(log_scales[n, j])
-            m0, m1, m2 = R[0, j] * s, R[1, j] * s, R[2, j] * s
-            a0 = cam[4] * m0 + cam[5] * m1 + cam[6] * m2
-            a1 = cam[7] * m0 + cam[8] * m1 + cam[9] * m2
-            a2 = cam[10] * m0 + cam[11] * m1 + cam[12] * m2
-            t0 = j00 * a0 + j02 * a2
-            t1 = j11 * a1 + j12 * a2
+            _, _, _, t0, t1 = _column(cam, R, np.exp(log_scales[n, j]), j, j00, j02, j11, j12)
             a += t0 * t0
             b += t0 * t1
             c += t1 * t1
@@ -115,17 +133,6 @@ def project_backward(means, quats, log_scales, cam, width, height, feats, visibl
         tyc = z * min(max(ry, -lyn), lyp)
         j00, j02 = fx / z, -fx * txc / (z * z)
         j11, j12 = fy / z, -fy * tyc / (z * z)
-        s = np.empty(3, np.float32)
-        A = np.empty((3, 3), np.float32)   # camera-frame R S
-        T = np.empty((2, 3), np.float32)   # J A
-        for j in range(3):
-            s[j] = np.exp(log_scales[n, j])
-            m0, m1, m2 = R[0, j] * s[j], R[1, j] * s[j], R[2, j] * s[j]
-            A[0, j] = cam[4] * m0 + cam[5] * m1 + cam[6] * m2
-            A[1, j] = cam[7] * m0 + cam[8] * m1 + cam[9] * m2
-            A[2, j] = cam[10] * m0 + cam[11] * m1 + cam[12] * m2
-            T[0, j] = j00 * A[0, j] + j02 * A[2, j]
-            T[1, j] = j11 * A[1, j] + j12 * A[2, j]
 
         # conic (p, q, r) = inverse of the 2D covariance -> gradient of the covariance
         p, q, r = feats[n, 2], feats[n, 3], feats[n, 4]
@@ -134,22 +141,17 @@ def project_backward(means, quats, log_scales, cam, width, height, feats, visibl
         g_c = -(q * q * u + _TWO * q * r * vv + r * r * ww)
         g_b = -_TWO * (p * q * u + (p * r + q * q) * vv + q * r * ww)
 
+        c0 = _column_backward(cam, R, np.exp(log_scales[n, 0]), 0, j00, j02, j11, j12, g_a, g_b, g_c)
+        c1 = _column_backward(cam, R, np.exp(log_scales[n, 1]), 1, j00, j02, j11, j12, g_a, g_b, g_c)
+        c2 = _column_backward(cam, R, np.exp(log_scales[n, 2]), 2, j00, j02, j11, j12, g_a, g_b, g_c)
+        g_log_scales[n, 0], g_log_scales[n, 1], g_log_scales[n, 2] = c0[3], c1[3], c2[3]
+        gj00, gj02 = c0[4] + c1[4] + c2[4], c0[5] + c1[5] + c2[5]
+        gj11, gj12 = c0[6] + c1[6] + c2[6], c0[7] + c1[7] + c2[7]
+
         g_z = grad[n, 9]
         g_x = fx / z * grad[n, 0]
         g_y = fy / z * grad[n, 1]
         g_z -= fx * x / (z * z) * grad[n, 0] + fy * y / (z * z) * grad[n, 1]
-        gj00 = gj02 = gj11 = gj12 = _ZERO
-        gA = np.empty((3, 3), np.float32)
-        for j in range(3):
-            gt0 = _TWO * g_a * T[0, j] + g_b * T[1, j]
-            gt1 = g_b * T[0, j] + _TWO * g_c * T[1, j]
-            gj00 += gt0 * A[0, j]
-            gj02 += gt0 * A[2, j]
-            gj11 += gt1 * A[1, j]
-            gj12 += gt1 * A[2, j]
-            gA[0, j] = j00 * gt0
-            gA[1, j] = j11 * gt1
-            gA[2, j] = j02 * gt0 + j12 * gt1
         z2 = z * z
         g_z += -fx / z2 * gj00 + _TWO * fx * txc / (z2 * z) * gj02
         g_z += -fy / z2 * gj11 + _TWO * fy * tyc / (z2 * z) * gj12
@@ -165,22 +167,14 @@ def project_backward(means, quats, log_scales, cam, width, height, feats, visibl
         for i in range(3):   # t = W p + w  ->  dL/dp = W^T dL/dt
             g_means[n, i] = cam[4 + i] * g_x + cam[7 + i] * g_y + cam[10 + i] * g_z
 
-        gR = np.empty((3, 3), np.float32)
-        for j in range(3):   # A = W R S
-            gs = _ZERO
-            for i in range(3):
-                gm = cam[4 + i] * gA[0, j] + cam[7 + i] * gA[1, j] + cam[10 + i] * gA[2, j]
-                gR[i, j] = gm * s[j]
-                gs += gm * R[i, j]
-            g_log_scales[n, j] = gs * s[j]
-        gw = _TWO * (-qz * gR[0, 1] + qy * gR[0, 2] + qz * gR[1, 0] - qx * gR[1, 2]
-                     - qy * gR[2, 0] + qx * gR[2, 1])
-        gx = _TWO * (qy * gR[0, 1] + qz * gR[0, 2] + qy * gR[1, 0] - _TWO * qx * gR[1, 1]
-                     - w * gR[1, 2] + qz * gR[2, 0] + w * gR[2, 1] - _TWO * qx * gR[2, 2])
-        gy = _TWO * (-_TWO * qy * gR[0, 0] + qx * gR[0, 1] + w * gR[0, 2] + qx * gR[1, 0]
-                     + qz * gR[1, 2] - w * gR[2, 0] + qz * gR[2, 1] - _TWO * qy * gR[2, 2])
-        gz = _TWO * (-_TWO * qz * gR[0, 0] - w * gR[0, 1] + qx * gR[0, 2] + w * gR[1, 0]
-                     - _TWO * qz * gR[1, 1] + qy * gR[1, 2] + qx * gR[2, 0] + qy * gR[2, 1])
+        # gR[i][j] = c_j[i]
+        gw = _TWO * (-qz * c1[0] + qy * c2[0] + qz * c0[1] - qx * c2[1] - qy * c0[2] + qx * c1[2])
+        gx = _TWO * (qy * c1[0] + qz * c2[0] + qy * c0[1] - _TWO * qx * c1[1] - w * c2[1]
+                     + qz * c0[2] + w * c1[2] - _TWO * qx * c2[2])
+        gy = _TWO * (-_TWO * qy * c0[0] + qx * c1[0] + w * c2[0] + qx * c0[1] + qz * c2[1]
+                     - w * c0[2] + qz * c1[2] - _TWO * qy * c2[2])
+        gz = _TWO * (-_TWO * qz * c0[0] - w * c1[0] + qx * c2[0] + w * c0[1] - _TWO * qz * c1[1]
+                     + qy * c2[1] + qx * c0[2] + qy * c1[2])
         dot = w * gw + qx * gx + qy * gy + qz * gz
         g_quats[n, 0] = (gw - w * dot) / qnorm
         g_quats[n, 1] = (gx - qx * dot) / qnorm
