@@ -6,10 +6,12 @@
   the valid depths in a small window (robust at depth edges), back-project, drop samples off the
   part's plane, PCA; the dominant direction is the axis and the mean of the samples a point on it.
   When the dominant eigenvalue does not dominate (too few points, a bent or blob-like set) the 2D
-  segment is lifted onto the part's plane instead. The sign makes a positive angle open the part
-  towards the camera.
+  segment is lifted onto the part's plane instead. An axis within :data:`SNAP_DEG` of plumb or level
+  is snapped to it (:func:`snap_axis`). The sign makes a positive angle open the part towards the
+  camera.
 - Prismatic: the cross product of the box's horizontal and vertical edge directions in 3D (the box
-  edges' midpoints lifted onto the part's plane), pointing towards the camera (pulling out).
+  edges' midpoints lifted onto the part's plane), pointing towards the camera (pulling out), made
+  level when within :data:`SNAP_DEG` of it.
 - Handle: the 3D centre of the handle box's pixels (those standing out of the part's plane if
   any), approached along minus the part's normal.
 - Extent: the part box's corners lifted onto the plane, a thin oriented box around the front
@@ -27,6 +29,7 @@ from .cameras import Camera
 FRONT_MARGIN = 0.05  # m in front of the part's plane kept in its extent (handles)
 BACK_MARGIN = 0.02   # m behind it
 DOMINANCE = 20.0     # first PCA eigenvalue over the second for a trusted hinge direction
+SNAP_DEG = 8.0       # an axis this close to level or plumb (within the part's plane) is snapped
 _SHRINK = 0.12       # fraction of the box trimmed on each side before fitting the plane
 
 
@@ -140,6 +143,28 @@ def revolute_axis(camera: Camera, depth: np.ndarray, points: np.ndarray, plane: 
     return _unit(ends[1] - ends[0]), ends.mean(axis=0), False
 
 
+def snap_axis(axis: np.ndarray, normal: np.ndarray, up: np.ndarray, kind: str,
+              max_deg: float = SNAP_DEG) -> np.ndarray:
+    """Furniture prior: hinges run plumb or level along the part's front, drawers slide level.
+
+    ``axis`` is replaced by the nearest such direction (same sign) if within ``max_deg``:
+    revolute -> ``up`` or the level direction within the plane of ``normal``; prismatic -> the
+    level part of the ``normal``.
+    """
+    if kind == "revolute":
+        candidates = [up - (up @ normal) * normal, np.cross(normal, up)]
+    else:
+        candidates = [normal - (normal @ up) * up]
+    for c in candidates:
+        if np.linalg.norm(c) < 0.3:  # a lid facing up: every direction in it is level, keep the axis
+            continue
+        c = _unit(c)
+        c = c if c @ axis >= 0 else -c
+        if c @ axis >= np.cos(np.radians(max_deg)):
+            return c
+    return axis
+
+
 def opening_sign(axis: np.ndarray, origin: np.ndarray, part_center: np.ndarray,
                  towards: np.ndarray) -> np.ndarray:
     """``axis`` flipped if needed so a positive rotation moves ``part_center`` along ``towards``."""
@@ -178,7 +203,7 @@ def extent(camera: Camera, box: np.ndarray, plane: Plane) -> dict[str, list]:
 
 
 def handle(camera: Camera, depth: np.ndarray, box: np.ndarray, plane: Plane
-           ) -> dict[str, list[float]] | None:
+           ) -> dict[str, list[float]]:
     """Grasp point (3D centre of the handle's pixels) and approach (minus the part's normal)."""
     uv, z, _ = box_pixels(depth, box)
     if len(z):

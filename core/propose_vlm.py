@@ -44,15 +44,17 @@ def propose_vlm(capture: Capture, gaussians: Gaussians, progress: Progress, conf
                 device: str = "auto") -> tuple[list[Joint], dict[str, Any]]:
     """Joints (source ``vlm``) proposed by the VLM for the static splat ``gaussians``.
 
-    ``meta``: ``view`` (the rendered camera: K, c2w, width, height), ``category``, ``parts_said``
+    ``meta``: ``view`` (the rendered camera: K, c2w, width, height), ``up`` (the world up it
+    assumes, :func:`up_direction`), ``category``, ``parts_said``
     (the number of parts the model named), ``skipped`` (reasons), ``answers`` (the raw answers).
     """
     dev = resolve_device(device)
     g = gaussians.detach().to(dev)
     means = g.means.cpu().numpy().astype(float)
     opaque = torch.sigmoid(g.opacity_logits).cpu().numpy() > 0.3
+    up = up_direction(capture)
     camera = frontal_camera(capture, means[opaque] if opaque.sum() >= 8 else means,
-                            config.width, config.height)
+                            config.width, config.height, up)
     progress.update(STAGE, 0.05, "rendering the frontal view")
     with torch.no_grad():
         out = render(g, camera, background=torch.tensor(BACKGROUND, device=dev))
@@ -62,6 +64,7 @@ def propose_vlm(capture: Capture, gaussians: Gaussians, progress: Progress, conf
 
     meta: dict[str, Any] = {"view": {"K": camera.K.tolist(), "c2w": camera.c2w.tolist(),
                                      "width": camera.width, "height": camera.height},
+                            "up": up.tolist(),
                             "category": None, "parts_said": None, "skipped": [], "answers": {}}
     progress.update(STAGE, 0.15, "asking the VLM: classification")
     messages = [user_message(vlm_prompts.CLASSIFY, png)]
@@ -87,8 +90,8 @@ def propose_vlm(capture: Capture, gaussians: Gaussians, progress: Progress, conf
             box = to_grid1000(part.bbox, camera.width, camera.height)
             answer = chat(config, [user_message(vlm_prompts.handle_prompt(box), png)])
             meta["answers"]["handles"][str(part.index)] = answer
-            joint = part_joint(camera, depth, part, answer, config.coords, progress, meta["skipped"],
-                               taken={j.name for j in joints})
+            joint = part_joint(camera, depth, part, answer, config.coords, up, progress,
+                               meta["skipped"], taken={j.name for j in joints})
             if joint is not None:
                 joints.append(joint)
         else:
@@ -101,8 +104,8 @@ def propose_vlm(capture: Capture, gaussians: Gaussians, progress: Progress, conf
 
 
 def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answer: str | None,
-               coords: str, progress: Progress, skipped: list[str], taken: set[str]
-               ) -> Joint | None:
+               coords: str, up: np.ndarray, progress: Progress, skipped: list[str],
+               taken: set[str]) -> Joint | None:
     """One parsed part lifted to a joint; None (reason logged and appended) if it cannot be."""
     plane = lift.fit_plane(camera, depth, part.bbox)
     if plane is None:
@@ -112,11 +115,13 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
     trusted = True
     if part.joint_type == "revolute":
         axis, origin, trusted = lift.revolute_axis(camera, depth, part.joint_points, plane)
+        axis = lift.snap_axis(axis, plane.normal, up, "revolute")
         axis = lift.opening_sign(axis, origin, center, plane.normal)
         limit = REVOLUTE_LIMIT
     else:
-        axis, origin = lift.prismatic_axis(camera, part.bbox, plane), center
-        limit = (0.0, float(PRISMATIC_TRAVEL * size[0]))
+        axis = lift.snap_axis(lift.prismatic_axis(camera, part.bbox, plane), plane.normal, up,
+                              "prismatic")
+        origin, limit = center, (0.0, float(PRISMATIC_TRAVEL * size[0]))
     handle = None
     if handle_answer is not None:
         hbox, reason = parse_handle(handle_answer, camera.width, camera.height, coords)
@@ -143,20 +148,37 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
                                                 if part.joint_points is not None else {}))
 
 
-def frontal_camera(capture: Capture, points: np.ndarray, width: int, height: int) -> Camera:
+def up_direction(capture: Capture) -> np.ndarray:
+    """World "up" from the capture's cameras, which are held level: the direction perpendicular to
+    all their right (x) axes, signed like their up (y) axes. When the right axes do not span a plane
+    (all cameras facing one way) the mean up axis is used."""
+    rot = np.array([f.camera.c2w[:3, :3] for f in capture.frames])
+    rights, ups = rot[:, :, 0], rot[:, :, 1].sum(axis=0)
+    s, vt = np.linalg.svd(rights, full_matrices=False)[1:]
+    up = vt[2] if s[1] > 0.15 * s[0] else ups
+    up = up / np.linalg.norm(up)
+    return -up if up @ ups < 0 else up
+
+
+def frontal_camera(capture: Capture, points: np.ndarray, width: int, height: int,
+                   up: np.ndarray | None = None) -> Camera:
     """A synthetic camera looking at the object's movable side, framing its points.
 
     Direction: the mean viewing direction of the interaction cameras (they watch the parts move),
     else of the static cameras; snapped to the nearest face of the object's footprint rectangle
-    (minimum-area rectangle of the points seen from above, z up) when within :data:`SNAP_DEG`,
-    looking down by the cameras' mean elevation clipped to :data:`ELEVATION_DEG`.
+    (minimum-area rectangle of the points seen from above, ``up`` from :func:`up_direction`) when
+    within :data:`SNAP_DEG`, looking down by the cameras' mean elevation clipped to
+    :data:`ELEVATION_DEG`.
     """
+    up = up_direction(capture) if up is None else up / np.linalg.norm(up)
+    side = np.cross(up, [1.0, 0, 0] if abs(up[0]) < 0.9 else [0, 1.0, 0])
+    basis = np.stack([side / np.linalg.norm(side), np.cross(up, side / np.linalg.norm(side)), up])
     frames = capture.interaction or capture.static or capture.frames
     m = np.mean([f.camera.forward for f in frames], axis=0)
     if np.linalg.norm(m) < 0.3:  # cameras all around: take the first view's side
         m = frames[0].camera.forward
-    m = m / np.linalg.norm(m)
-    angle, center, half = footprint(points)
+    m = basis @ (m / np.linalg.norm(m))  # in the up frame from here on
+    angle, center, half = footprint(points @ basis.T)
     horiz = np.array([m[0], m[1], 0.0])
     if np.linalg.norm(horiz) > 1e-6:
         horiz /= np.linalg.norm(horiz)
@@ -170,23 +192,24 @@ def frontal_camera(capture: Capture, points: np.ndarray, width: int, height: int
     el = math.radians(float(np.clip(math.degrees(math.asin(np.clip(m[2], -1, 1))),
                                     *ELEVATION_DEG)))
     d = math.cos(el) * horiz + np.array([0.0, 0.0, math.sin(el)])
-    f = width / 2 / math.tan(math.radians(HFOV_DEG) / 2)
-    K = intrinsics(f, f, width / 2, height / 2)
     R = np.array([[math.cos(angle), -math.sin(angle), 0], [math.sin(angle), math.cos(angle), 0],
                   [0, 0, 1.0]])
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    q = (signs * half) @ R.T  # box corners relative to the centre
-    probe = look_at(center - d, center)
+    q = (signs * half) @ R.T @ basis  # box corners relative to the centre, world axes
+    d, center = d @ basis, center @ basis
+    f = width / 2 / math.tan(math.radians(HFOV_DEG) / 2)
+    probe = look_at(center - d, center, up)
     r, u = probe[:3, 0], probe[:3, 1]
     sx, sy = FILL * (width / 2) / f, FILL * (height / 2) / f
     dist = max(float(np.max(np.abs(q @ r) / sx - q @ d)), float(np.max(np.abs(q @ u) / sy - q @ d)),
                float(np.max(-(q @ d))) + 0.05)
-    return Camera(K, look_at(center - dist * d, center), width, height)
+    return Camera(intrinsics(f, f, width / 2, height / 2), look_at(center - dist * d, center, up),
+                  width, height)
 
 
 def footprint(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Minimum-area rectangle of the points seen from above (1-99 percentiles, 1 degree steps):
-    its angle (radians, of its first side), the 3D centre and half sizes of the box it bounds."""
+    """Minimum-area rectangle of the points seen from above (along -z; 1-99 percentiles, 1 degree
+    steps): its angle (radians, of its first side), the centre and half sizes of the box it bounds."""
     xy = points[:, :2]
     best = None
     for a in np.radians(np.arange(0.0, 90.0, 1.0)):
