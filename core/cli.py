@@ -124,6 +124,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--per-category", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--depth-noise", type=float, default=0.0)
+    p.add_argument("--simultaneous", action="store_true",
+                   help="generated sets: the first two joints also move together")
+    p.add_argument("--category", nargs="+", choices=CATEGORIES, default=None,
+                   help="generated sets: only these categories")
+    p.add_argument("--width", type=int, default=160, help="generated sets: image width")
+    p.add_argument("--height", type=int, default=120, help="generated sets: image height")
     _device(p)
     _common(p)
     return parser

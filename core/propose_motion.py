@@ -417,11 +417,18 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
                             "icp_rms_mm": 1000 * float(np.median([track.rms[t] for t in moving]))})
         progress.update("propose", 0.1 + 0.9 * (k + 1) / len(parts), f"part {k + 1}: {joint.type}")
     meta = {"method": "motion",
-            "view": views[0].ref_source if views else None,
+            "view": _view_meta(views[0]) if views else None,
             "cameras": [{"name": v.name, "closed_state": v.ref_source,
                          "threshold_mm": 1000 * v.threshold} for v in views],
             "motion": diagnostics}
     return joints, meta
+
+
+def _view_meta(v: View) -> dict[str, Any]:
+    """The view the joints' ``bbox`` refer to: the first interaction camera."""
+    cam = v.camera
+    return {"camera": v.name, "frame": v.ref_source, "K": cam.K.tolist(), "c2w": cam.c2w.tolist(),
+            "width": cam.width, "height": cam.height}
 
 
 def _make_joint(k: int, fit, values: dict[int, float], moving: list[int], S: np.ndarray,
