@@ -125,6 +125,8 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
     handle = None
     if handle_answer is not None:
         hbox, reason = parse_handle(handle_answer, camera.width, camera.height, coords)
+        if hbox is not None and not box_within(hbox, part.bbox):
+            hbox, reason = None, f"its box {_r(hbox)} is not within the part's box {_r(part.bbox)}"
         if hbox is None:
             progress.log(f"part {part.index} ({part.label}): handle not used: {reason}", "info")
         else:
@@ -239,6 +241,13 @@ def _skip(progress: Progress, skipped: list[str], reason: str) -> None:
     """Log why a part's answer is not used and record it in the proposal's ``skipped`` list."""
     progress.log(f"VLM answer skipped: {reason}", "warning")
     skipped.append(reason)
+
+
+def box_within(inner: np.ndarray, outer: np.ndarray, margin: float = 0.1) -> bool:
+    """True if the centre of box ``inner`` lies in box ``outer`` grown by ``margin`` of its size."""
+    cx, cy = (inner[0] + inner[2]) / 2, (inner[1] + inner[3]) / 2
+    mx, my = margin * (outer[2] - outer[0]), margin * (outer[3] - outer[1])
+    return bool(outer[0] - mx <= cx <= outer[2] + mx and outer[1] - my <= cy <= outer[3] + my)
 
 
 def _r(box: np.ndarray) -> list[float]:

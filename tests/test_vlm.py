@@ -23,6 +23,7 @@ from artgs.core.capture import Capture
 from artgs.core.errors import ArtgsError, InputError
 from artgs.core import lift
 from artgs.core.vlm_client import VlmConfig, chat, user_message, vlm_config
+from artgs.core.propose_vlm import box_within
 from artgs.core.vlm_parse import parse_classification, parse_handle, parse_parts, to_grid1000
 
 W, H = 160, 120
@@ -395,13 +396,19 @@ def _grid(values, camera: Camera) -> str:
     return "<box>[[" + ", ".join(str(int(round(x))) for x in v.ravel()) + "]]</box>"
 
 
-def _canned_answers(camera: Camera, joints, broken: int | None = None) -> Callable:
-    """A server answering the three questions from the ground truth projected into ``camera``."""
+def _canned_answers(camera: Camera, joints, broken: int | None = None,
+                    stray_handles: bool = False) -> Callable:
+    """A server answering the three questions from the ground truth projected into ``camera``;
+    part ``broken`` gets an unreadable box, ``stray_handles`` puts handles outside their parts."""
     lines, boxes, handles = [], [], []
     for n, j in enumerate(joints, 1):
         box = _front_box(camera, j)
         boxes.append(box)
         hb, _ = camera.project(np.array([j.handle["point"]]))
+        if stray_handles:  # the image corner farthest from the part
+            hb = np.array([[4.0 if box[0] + box[2] > camera.width else camera.width - 4.0,
+                            4.0 if box[1] + box[3] > camera.height else camera.height - 4.0]])
+            assert not box_within(np.concatenate([hb[0] - 3, hb[0] + 3]), box)
         handles.append(np.concatenate([hb[0] - 3, hb[0] + 3]))
         if j.type == "revolute":
             e = j.extent
@@ -528,7 +535,7 @@ def test_propose_vlm_skips_an_unparseable_part_and_keeps_the_others(cabinet):
     capture, gaussians, gt = cabinet
     camera = frontal_camera(capture, gaussians.means.numpy().astype(float), W, H)
     broken = 1 + next(k for k, j in enumerate(gt) if j.type == "prismatic")
-    with FakeVlm(_canned_answers(camera, gt, broken=broken)) as fake:
+    with FakeVlm(_canned_answers(camera, gt, broken=broken, stray_handles=True)) as fake:
         stream = io.StringIO()
         joints, meta = propose_vlm(capture, gaussians, Progress("json", stream=stream),
                                    VlmConfig(endpoint=fake.endpoint, model="m", width=W, height=H))
@@ -537,6 +544,9 @@ def test_propose_vlm_skips_an_unparseable_part_and_keeps_the_others(cabinet):
     events = [json.loads(line) for line in stream.getvalue().splitlines()]
     warnings = [e["message"] for e in events if e["event"] == "log" and e["level"] == "warning"]
     assert any(f"part {broken}" in w and "no bounding box" in w for w in warnings)
+    assert joints[0].handle is None  # the handle answer pointed outside the door
+    assert any(e["event"] == "log" and "handle not used" in e["message"]
+               and "not within the part's box" in e["message"] for e in events)
 
 
 def test_numbered_lists_and_labels_with_clauses():
