@@ -21,6 +21,7 @@ import os
 import socket
 import time
 import urllib.error
+import urllib.parse
 import urllib.request
 from dataclasses import dataclass
 from typing import Any
@@ -112,11 +113,12 @@ def chat(config: VlmConfig, messages: list[dict[str, Any]]) -> str:
     headers = {"Content-Type": "application/json", "Accept": "application/json"}
     if config.api_key:
         headers["Authorization"] = f"Bearer {config.api_key}"
+    opener = _opener(url)
     attempt = 0
     while True:
         request = urllib.request.Request(url, data=body, headers=headers, method="POST")
         try:
-            with urllib.request.urlopen(request, timeout=config.timeout) as response:
+            with opener.open(request, timeout=config.timeout) as response:
                 raw = response.read()
             return _answer_text(raw, url)
         except urllib.error.HTTPError as exc:
@@ -138,6 +140,15 @@ def chat(config: VlmConfig, messages: list[dict[str, Any]]) -> str:
             raise ArtgsError(f"{problem} (after {attempt + 1} attempts)")
         time.sleep(config.backoff * 2 ** attempt)
         attempt += 1
+
+
+def _opener(url: str) -> urllib.request.OpenerDirector:
+    """A URL opener; a server on this machine is reached directly, never through a proxy from
+    ``$http_proxy``/``$https_proxy`` (others follow the environment like any urllib client)."""
+    host = (urllib.parse.urlsplit(url).hostname or "").lower()
+    if host in ("localhost", "::1") or host.startswith("127."):
+        return urllib.request.build_opener(urllib.request.ProxyHandler({}))
+    return urllib.request.build_opener()
 
 
 def _answer_text(raw: bytes, url: str) -> str:

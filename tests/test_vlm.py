@@ -572,3 +572,12 @@ def test_snap_axis_only_within_its_angle():
     lid = _unit([0, 0.05, 1.0])  # a lid facing up: every direction in it is level, none is snapped
     np.testing.assert_allclose(lift.snap_axis(_unit([1, 0.1, 0]), lid, up, "revolute"),
                                _unit([1, 0.1, 0]))
+
+
+def test_a_local_server_is_reached_without_the_environment_proxy(monkeypatch):
+    monkeypatch.setenv("http_proxy", "http://127.0.0.1:9")  # nothing listens there
+    monkeypatch.setenv("HTTP_PROXY", "http://127.0.0.1:9")
+    monkeypatch.delenv("no_proxy", raising=False)
+    monkeypatch.delenv("NO_PROXY", raising=False)
+    with FakeVlm(lambda body: (200, completion("direct"), 0)) as fake:
+        assert chat(cfg(fake.endpoint, retries=0), [user_message("hi")]) == "direct"
