@@ -71,6 +71,7 @@ _TYPE_KEYS = ("joint_type", "type", "joint")
 _TAG_BOX = re.compile(r"<box>(.*?)</box>|<\|box_start\|>(.*?)<\|box_end\|>", re.S | re.I)
 _GROUP = re.compile(r"[\[(][\d\s.,+\-\[\]()]*[\])]")
 _FLOAT = re.compile(r"-?\d+(?:\.\d+)?")
+_JOIN = re.compile(r"\s*(?:,|;|to|and|-|–|->|→)?\s*", re.I)  # between the two points of a segment
 _EDGE_TOL = 0.03  # fraction of the image size a coordinate may overshoot before it is refused
 
 
@@ -97,7 +98,7 @@ class _Coords:
 
 def parse_classification(text: str) -> tuple[str | None, int | None]:
     """Category (one of the seven, via synonyms) and number of movable parts, None where absent."""
-    low = text.lower()
+    low = text.replace("*", "").lower()
     category, best = None, (len(low) + 1, 0)
     for word, cat in CATEGORY_SYNONYMS.items():
         m = re.search(r"\b" + re.escape(word) + r"s?\b", low)
@@ -121,7 +122,7 @@ def parse_parts(text: str, width: int, height: int, coords: str = "auto") -> lis
         system = _coordinate_system(groups, width, height, coords, json_bbox2d=_has_bbox2d(items))
         parts = [_finish(part, groups, system, width, height) for part, groups in raw]
     else:
-        raw = [_part_from_text(i, segment) for i, segment in _segments(text)]
+        raw = [_part_from_text(i, segment) for i, segment in _segments(text.replace("*", ""))]
         groups = [g for _, groups in raw for g in groups]
         if not groups:
             return [PartAnswer(1, skip=f"no coordinates in the answer {_quote(text)}")]
@@ -257,7 +258,7 @@ def _part_from_text(index: int, segment: str) -> tuple[PartAnswer, list[_Coords]
         part.joint_type = _joint_type(low)
     groups = _groups(segment)
     joint_kw = [m.start() for m in re.finditer(r"joint param\w*|joint\s+(?:axis|line|points?)|"
-                                                r"\baxis\b|\bhinge line\b", low)]
+                                                r"\baxis\b|\bhinge\b", low)]
     box_kw = [m.start() for m in re.finditer(r"bounding box|\bbbox\b|(?<![</])\bbox\b(?!>)|\blocated at\b",
                                               low)]
     for k, g in enumerate(groups):
@@ -280,11 +281,18 @@ def _groups(text: str) -> list[_Coords]:
         taken.append(m.span())
         if len(values) >= 4:
             out.append(_Coords(values, m.start(), True))
+    pending: tuple[list[float], int, int] | None = None  # a lone point (x, y) awaiting its pair
     for m in _GROUP.finditer(text):
         if any(a <= m.start() < b for a, b in taken):
             continue
         values = [float(v) for v in _FLOAT.findall(m.group(0))]
-        if len(values) >= 4:
+        if len(values) == 2:  # "(x1, y1) to (x2, y2)": two points make one group
+            if pending is not None and _JOIN.fullmatch(text[pending[2]:m.start()]):
+                out.append(_Coords(pending[0] + values, pending[1], False))
+                pending = None
+            else:
+                pending = (values, m.start(), m.end())
+        elif len(values) >= 4:
             out.append(_Coords(values, m.start(), False))
     return sorted(out, key=lambda g: g.pos)
 

@@ -581,3 +581,15 @@ def test_a_local_server_is_reached_without_the_environment_proxy(monkeypatch):
     monkeypatch.delenv("NO_PROXY", raising=False)
     with FakeVlm(lambda body: (200, completion("direct"), 0)) as fake:
         assert chat(cfg(fake.endpoint, retries=0), [user_message("hi")]) == "direct"
+
+
+def test_markdown_and_point_pairs_from_general_purpose_models():
+    text = ("- **Part 1**: door (revolute), hinge from (120, 80) to (120, 600), bbox (120, 80, 480, 600)\n"
+            "- **Part 2**: drawer (prismatic), bbox (120, 650, 880, 900)")
+    a, b = parse_parts(text, 448, 336)
+    assert (a.label, a.joint_type, a.skip, b.label, b.joint_type, b.skip) == (
+        "door", "revolute", None, "drawer", "prismatic", None)
+    np.testing.assert_allclose(a.joint_points, [[53.76, 26.88], [53.76, 201.6]])
+    np.testing.assert_allclose(b.bbox, [53.76, 218.4, 394.24, 302.4])
+    assert parse_classification("The object is a **refrigerator**. It has **2** movable parts.") == (
+        "refrigerator", 2)
