@@ -11,8 +11,8 @@ Steps (all in the world frame, metres):
    (measured depth farther than the point by more than the threshold, or no object there) belongs
    to a moving part: rigid scenes cannot reveal what was behind a surface. Such points are grouped
    into parts by 3D connectivity and the step at which they first vanish.
-4. Each part is tracked through the steps: hypotheses (previous pose, constant velocity, and at
-   the part's first motion rotations about its box edges and slides along its normal) are scored
+4. Each part is tracked through the steps: hypotheses (previous pose, constant velocity, earlier
+   poses, and turns about the part's box edges and slides along its normal) are scored
    by projecting the part into the step's depth maps, the best ones refined by robust
    point-to-plane ICP against the step's measured points.
 5. One revolute and one prismatic joint are fitted to all of the part's motions jointly
@@ -49,7 +49,8 @@ class MotionConfig:
     min_part_points: int = 40         # smaller groups of vanished points are noise
     min_part_fraction: float = 0.01   # ... or smaller than this share of the splat points
     track_points: int = 1200          # part points used for tracking
-    min_angle_deg: float = 5.0        # revolute when the part turns at least this much
+    min_angle_deg: float = 8.0        # revolute when the part turns at least this much ...
+    min_rms_ratio: float = 3.0        # ... and a slide fits that much worse (core.rigid.fit_joint)
     icp_iterations: int = 30
     refine_rounds: int = 1            # joint refinements on the measurements (part re-gathered)
     snap_deg: float = 25.0            # a slide this close to the front's normal is taken along it
@@ -338,8 +339,8 @@ def track_part(points: np.ndarray, views: list[View], times: list[int], start: i
         hyps = [base]
         if len(prev) >= 2:
             hyps.append(base @ np.linalg.inv(prev[-2]) @ base)
-        if t == start or (len(prev) >= 2 and np.allclose(prev[-1], prev[-2], atol=1e-3)):
-            hyps += [H @ base for H in first_move_hypotheses(apply(base, points))]
+        hyps += prev[:-1]   # the part may go back through earlier poses (closing)
+        hyps += [H @ base for H in first_move_hypotheses(apply(base, points))]
         scored = sorted(hyps, key=lambda H: -projective_score(apply(H, points), views, t)[0])
         P, N, tree = clouds[t]
         best = None
@@ -393,7 +394,8 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
         track = track_part(St, views, times, start, {t: c[:3] for t, c in clouds.items()}, cfg)
         moving = [t for t in times if t >= start]
         weights = np.array([max(track.score[t], 0.05) for t in moving])
-        fit = fit_joint(St, [track.transforms[t] for t in moving], cfg.min_angle_deg, weights)
+        fit = fit_joint(St, [track.transforms[t] for t in moving], cfg.min_angle_deg, weights,
+                        cfg.min_rms_ratio)
         steps = [StepData(*clouds[t][:3], _visible(views, t)) for t in moving]
         thr = float(np.median([v.threshold for v in views]))
         for _ in range(cfg.refine_rounds):

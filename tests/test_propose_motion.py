@@ -1,0 +1,140 @@
+"""The motion route and ``artgs propose`` on generated captures (real synth, splat, CLI)."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from artgs.core.capture import load_capture
+from artgs.core.joints import read_articulation
+from artgs.core.metrics import match_joints
+from artgs.core.ply import write_ply
+from artgs.core.propose_motion import propose_motion
+from artgs.core.reconstruct import initial_splats
+from artgs.core.synth import generate_object
+
+SIZE = {"width": 96, "height": 72, "static_views": 12, "steps": 3}
+
+
+def _capture(root: Path, category: str, seed: int, **opts) -> Path:
+    return generate_object(root / f"{category}_{seed}", category, seed, **SIZE, **opts)
+
+
+def _run(capture_dir: Path):
+    capture = load_capture(capture_dir)
+    splat, _ = initial_splats(capture.static)
+    opacity = 1 / (1 + np.exp(-splat.opacity_logits.astype(float)))
+    joints, meta = propose_motion(capture, splat.means, opacity, render_depth=None)
+    gt = read_articulation(capture_dir / "gt.json").joints
+    return joints, meta, gt, match_joints(joints, gt)
+
+
+def _check(joints, gt, scores, max_ae, max_oe, max_state_rev, max_state_pri):
+    assert len(joints) == len(gt)
+    by_name = {j.name: j for j in joints}
+    for s, true in zip(scores, gt):
+        assert s.type_correct, s
+        assert s.axis_error_deg < max_ae, s
+        if true.type == "revolute":
+            assert s.origin_error_cm < max_oe, s
+        pred = by_name[s.pred_name]
+        assert pred.source == "motion" and 0 <= pred.confidence <= 1
+        err = max(abs(pred.states[t] - v) for t, v in true.states.items())
+        assert err < (max_state_rev if true.type == "revolute" else max_state_pri), (s, err)
+        assert pred.limit[0] <= 1e-3 and abs(pred.limit[1] - true.limit[1]) < \
+            (max_state_rev if true.type == "revolute" else max_state_pri)
+        # the part's box holds the true part's centre; the handle sits on the part
+        ext = pred.extent
+        local = (np.asarray(true.extent["center"]) - ext["center"]) @ np.asarray(ext["axes"]).T
+        assert np.all(np.abs(local) <= np.asarray(ext["half_size"]) + 0.03), (s, local)
+        h = np.asarray(pred.handle["point"])
+        local_h = (h - ext["center"]) @ np.asarray(ext["axes"]).T
+        assert np.all(np.abs(local_h) <= np.asarray(ext["half_size"]) + 0.02)
+        assert abs(np.linalg.norm(pred.handle["approach"]) - 1) < 1e-6
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("motion")
+
+
+def test_drawer_unit_prismatic(data):
+    joints, meta, gt, scores = _run(_capture(data, "drawer", 1))
+    assert all(j.type == "prismatic" for j in gt)
+    _check(joints, gt, scores, max_ae=1.0, max_oe=None, max_state_rev=None, max_state_pri=0.015)
+    assert meta["method"] == "motion" and len(meta["motion"]) == len(joints)
+
+
+def test_microwave_revolute(data):
+    joints, meta, gt, scores = _run(_capture(data, "microwave", 1))
+    assert gt[0].type == "revolute"
+    _check(joints, gt, scores, max_ae=2.0, max_oe=1.5, max_state_rev=math.radians(3),
+           max_state_pri=None)
+
+
+def test_cabinet_both_types_noisy_and_simultaneous(data):
+    joints, meta, gt, scores = _run(_capture(data, "cabinet", 1, depth_noise=0.002,
+                                             simultaneous=True))
+    assert sorted(j.type for j in gt) == ["prismatic", "revolute"]
+    _check(joints, gt, scores, max_ae=3.0, max_oe=3.0, max_state_rev=math.radians(5),
+           max_state_pri=0.02)
+    assert all(c["threshold_mm"] > 6.0 for c in meta["cameras"])   # noise raised the threshold
+
+
+# --- the command ------------------------------------------------------------------------------
+
+def _artgs(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "artgs", *args], capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_propose_command_writes_valid_proposals(data):
+    cap = _capture(data, "microwave", 1)
+    out = data / "out_ok"
+    out.mkdir()
+    write_ply(out / "splat.ply", initial_splats(load_capture(cap).static)[0])
+    res = _artgs("propose", str(out), "--capture", str(cap), "--quiet")
+    assert res.returncode == 0, res.stderr
+    art = read_articulation(out / "proposals.json")
+    assert art.meta["source"] == "motion" and len(art.joints) == 1
+    j = art.joints[0]
+    assert j.type == "revolute" and j.source == "motion" and j.extent and j.handle
+    x1, y1, x2, y2 = j.bbox
+    assert 0 <= x1 < x2 <= 96 and 0 <= y1 < y2 <= 72
+    assert art.meta["view"]["width"] == 96
+    report = json.loads((out / "report.json").read_text())
+    assert report["stages"]["propose"]["joints"] == 1
+    assert report["stages"]["propose"]["method"] == "motion"
+
+
+def test_propose_command_refuses_bad_input_and_keeps_files(data):
+    cap = _capture(data, "microwave", 1)
+    out = data / "out_bad"
+    out.mkdir()
+    sentinel = b'{"frame": "world", "joints": []}'
+    (out / "proposals.json").write_bytes(sentinel)
+    res = _artgs("propose", str(out), "--capture", str(cap))
+    assert res.returncode == 2
+    assert "splat.ply" in res.stderr and "reconstruct" in res.stderr
+
+    static_only = data / "static_only"
+    shutil.copytree(cap, static_only)
+    tj = json.loads((static_only / "transforms.json").read_text())
+    tj["frames"] = [f for f in tj["frames"] if f.get("phase", "static") == "static"]
+    (static_only / "transforms.json").write_text(json.dumps(tj))
+    write_ply(out / "splat.ply", initial_splats(load_capture(static_only).static)[0])
+    res = _artgs("propose", str(out), "--capture", str(static_only))
+    assert res.returncode == 2
+    assert "transforms.json" in res.stderr and "interaction" in res.stderr
+    assert (out / "proposals.json").read_bytes() == sentinel
+
+    res = _artgs("propose", str(out), "--capture", str(cap), "--method", "vlm")
+    assert res.returncode == 2 and "ARTGS_VLM_ENDPOINT" in res.stderr
+    assert (out / "proposals.json").read_bytes() == sentinel
