@@ -58,7 +58,8 @@ def backproject_uv(camera: Camera, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 def robust_depth(depth: np.ndarray, uv: np.ndarray, radius: int = 2) -> np.ndarray:
     """Per image point, the median of the valid depths in a (2r+1)^2 window, keeping only the
-    nearest depth layer (a window straddling a depth edge votes for the surface in front); 0 if none.
+    nearest depth layer (a window straddling a depth edge votes for the surface in front);
+    0 if none.
     """
     h, w = depth.shape
     uv = np.asarray(uv, float).reshape(-1, 2)
@@ -85,7 +86,8 @@ def box_pixels(depth: np.ndarray, box: np.ndarray) -> tuple[np.ndarray, np.ndarr
     sub = depth[r0:r1, c0:c1]
     jj, ii = np.meshgrid(np.arange(c0, c1) + 0.5, np.arange(r0, r1) + 0.5)
     valid = np.isfinite(sub) & (sub > 0)
-    return np.stack([jj[valid], ii[valid]], axis=1), sub[valid], float(valid.mean()) if valid.size else 0.0
+    share = float(valid.mean()) if valid.size else 0.0
+    return np.stack([jj[valid], ii[valid]], axis=1), sub[valid], share
 
 
 def fit_plane(camera: Camera, depth: np.ndarray, box: np.ndarray) -> Plane | None:
@@ -156,7 +158,7 @@ def snap_axis(axis: np.ndarray, normal: np.ndarray, up: np.ndarray, kind: str,
     else:
         candidates = [normal - (normal @ up) * up]
     for c in candidates:
-        if np.linalg.norm(c) < 0.3:  # a lid facing up: every direction in it is level, keep the axis
+        if np.linalg.norm(c) < 0.3:  # a lid facing up: every direction in it is level
             continue
         c = _unit(c)
         c = c if c @ axis >= 0 else -c

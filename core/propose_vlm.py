@@ -137,17 +137,19 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
         n += 1
         name = f"{base}_{n}"
     ext = lift.extent(camera, part.bbox, plane)
-    geometry = np.concatenate([axis, origin, np.ravel(ext["axes"]), ext["center"], ext["half_size"]])
+    geometry = np.concatenate([axis, origin, np.ravel(ext["axes"]), ext["center"],
+                               ext["half_size"]])
     if not np.all(np.isfinite(geometry)):
         return _skip(progress, skipped, f"part {part.index} ({part.label}): degenerate geometry "
                      f"from its box {_r(part.bbox)}")
     confidence = plane.coverage * (1.0 if trusted else 0.6)
+    extra: dict[str, Any] = {"label": part.label}
+    if part.joint_points is not None:
+        extra["joint_points"] = part.joint_points.round(2).tolist()
     return Joint(name=name, type=part.joint_type, axis=axis, origin=origin, limit=limit,
                  source="vlm", confidence=round(float(min(max(confidence, 0.0), 1.0)), 3),
-                 bbox=[round(float(v), 2) for v in part.bbox], handle=handle,
-                 extent=ext,
-                 extra={"label": part.label} | ({"joint_points": part.joint_points.round(2).tolist()}
-                                                if part.joint_points is not None else {}))
+                 bbox=[round(float(v), 2) for v in part.bbox], handle=handle, extent=ext,
+                 extra=extra)
 
 
 def up_direction(capture: Capture) -> np.ndarray:
@@ -211,7 +213,8 @@ def frontal_camera(capture: Capture, points: np.ndarray, width: int, height: int
 
 def footprint(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Minimum-area rectangle of the points seen from above (along -z; 1-99 percentiles, 1 degree
-    steps): its angle (radians, of its first side), the centre and half sizes of the box it bounds."""
+    steps): its angle (radians, of its first side), the centre and half sizes of the box it
+    bounds."""
     xy = points[:, :2]
     best = None
     for a in np.radians(np.arange(0.0, 90.0, 1.0)):

@@ -72,9 +72,9 @@ def vlm_config(args_endpoint: str | None = None, args_model: str | None = None,
     endpoint = (args_endpoint or os.environ.get(ENV_ENDPOINT, "")).strip()
     model = (args_model or os.environ.get(ENV_MODEL, "")).strip()
     if not endpoint:
-        raise InputError("--vlm-endpoint", f"no VLM endpoint configured: set ${ENV_ENDPOINT} (or the "
-                         "add-on preference 'VLM endpoint', or --vlm-endpoint) to an OpenAI-compatible "
-                         "base URL such as http://127.0.0.1:23333/v1")
+        raise InputError("--vlm-endpoint", f"no VLM endpoint configured: set ${ENV_ENDPOINT} (or "
+                         "the add-on preference 'VLM endpoint', or --vlm-endpoint) to an "
+                         "OpenAI-compatible base URL such as http://127.0.0.1:23333/v1")
     if not endpoint.startswith(("http://", "https://")):
         raise InputError("--vlm-endpoint", f"{endpoint!r} is not an http:// or https:// URL")
     if not model:

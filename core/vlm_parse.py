@@ -1,4 +1,4 @@
-"""Reading the VLM's answers: category, number of parts, per-part joint type, joint points and boxes.
+"""Reading the VLM's answers: category, number of parts, per part its joint type, points and box.
 
 Accepted answer formats (mixed freely, case-insensitive):
 
@@ -46,7 +46,8 @@ CATEGORY_SYNONYMS: dict[str, str] = {
     "closet": "storage", "locker": "storage", "shelf": "storage", "bookcase": "storage",
     "drawer": "drawer", "chest of drawers": "drawer", "dresser": "drawer",
     "drawer unit": "drawer", "nightstand": "drawer", "filing cabinet": "drawer",
-    "cabinet": "cabinet", "cupboard": "cabinet", "sideboard": "cabinet", "kitchen cabinet": "cabinet",
+    "cabinet": "cabinet", "cupboard": "cabinet", "sideboard": "cabinet",
+    "kitchen cabinet": "cabinet",
 }
 assert set(CATEGORY_SYNONYMS.values()) == set(CATEGORIES)
 
@@ -71,7 +72,7 @@ _TYPE_KEYS = ("joint_type", "type", "joint")
 _TAG_BOX = re.compile(r"<box>(.*?)</box>|<\|box_start\|>(.*?)<\|box_end\|>", re.S | re.I)
 _GROUP = re.compile(r"[\[(][\d\s.,+\-\[\]()]*[\])]")
 _FLOAT = re.compile(r"-?\d+(?:\.\d+)?")
-_JOIN = re.compile(r"\s*(?:,|;|to|and|-|–|->|→)?\s*", re.I)  # between the two points of a segment
+_JOIN = re.compile(r"\s*(?:,|;|to|and|-|–|->|→)?\s*", re.I)  # between a segment's two points
 _EDGE_TOL = 0.03  # fraction of the image size a coordinate may overshoot before it is refused
 
 
@@ -89,11 +90,13 @@ class PartAnswer:
 
 @dataclass
 class _Coords:
-    """A coordinate group found in an answer: its numbers, text position and whether it was tagged."""
+    """A coordinate group found in an answer: its numbers, text position, whether it was inside a
+    box tag, and what it is (``joint`` points or part ``box``, once known)."""
 
     values: list[float]
-    pos: int
-    tagged: bool
+    pos: int = 0
+    tagged: bool = False
+    role: str = ""
 
 
 def parse_classification(text: str) -> tuple[str | None, int | None]:
@@ -128,8 +131,6 @@ def parse_parts(text: str, width: int, height: int, coords: str = "auto") -> lis
             return [PartAnswer(1, skip=f"no coordinates in the answer {_quote(text)}")]
         system = _coordinate_system(groups, width, height, coords)
         parts = [_finish(part, groups, system, width, height) for part, groups in raw]
-    if not parts:
-        parts = [PartAnswer(1, skip=f"no part found in the answer {_quote(text)}")]
     return parts
 
 
@@ -141,7 +142,7 @@ def parse_handle(text: str, width: int, height: int, coords: str = "auto"
         groups = []
         for item in items:
             values = _find_key(item, _BOX_KEYS) if isinstance(item, dict) else item
-            groups += _flat_group(values, 0)
+            groups += _flat_group(values, "box")
         system = _coordinate_system(groups, width, height, coords, json_bbox2d=_has_bbox2d(items))
     else:
         groups = _groups(text)
@@ -193,7 +194,7 @@ def _find_key(item: dict, keys: tuple[str, ...]) -> Any:
     return None
 
 
-def _flat_group(values: Any, pos: int) -> list[_Coords]:
+def _flat_group(values: Any, role: str) -> list[_Coords]:
     """A JSON value holding 4 numbers (flat or as two pairs) as one coordinate group."""
     if values is None:
         return []
@@ -202,7 +203,7 @@ def _flat_group(values: Any, pos: int) -> list[_Coords]:
         numbers = [float(v) for v in flat]
     except (TypeError, ValueError):
         return []
-    return [_Coords(numbers, pos, False)] if len(numbers) >= 4 else []
+    return [_Coords(numbers, role=role)] if len(numbers) >= 4 else []
 
 
 def _part_from_json(index: int, item: dict) -> tuple[PartAnswer, list[_Coords]]:
@@ -212,11 +213,8 @@ def _part_from_json(index: int, item: dict) -> tuple[PartAnswer, list[_Coords]]:
         part.label = _clean_label(label)
     kind = _find_key(item, _TYPE_KEYS)
     part.joint_type = _joint_type(kind) if isinstance(kind, str) else None
-    joint = _flat_group(_find_key(item, _JOINT_KEYS), 0)
-    box = _flat_group(_find_key(item, _BOX_KEYS), 1)
-    for g in joint:
-        g.pos = -1  # marks the joint group
-    return part, joint + box
+    return part, (_flat_group(_find_key(item, _JOINT_KEYS), "joint")
+                  + _flat_group(_find_key(item, _BOX_KEYS), "box"))
 
 
 # --- parts from free text --------------------------------------------------------------------
@@ -242,7 +240,8 @@ def _part_from_text(index: int, segment: str) -> tuple[PartAnswer, list[_Coords]
     part = PartAnswer(index)
     low = segment.lower()
     ref = re.search(r"<ref>(.*?)</ref>", segment, re.I | re.S)
-    name = re.search(r"\bis (?:an? |the )?([a-z][a-z \-]*?)(?=,|\.|;|\(| and\b| with\b| whose\b| that\b| which\b|$)",
+    name = re.search(r"\bis (?:an? |the )?([a-z][a-z \-]*?)"
+                     r"(?=,|\.|;|\(| and\b| with\b| whose\b| that\b| which\b|$)",
                      re.sub(r"<[^>]*>", " ", low))
     if ref and ref.group(1).strip():
         part.label = _clean_label(ref.group(1))
@@ -259,8 +258,8 @@ def _part_from_text(index: int, segment: str) -> tuple[PartAnswer, list[_Coords]
     groups = _groups(segment)
     joint_kw = [m.start() for m in re.finditer(r"joint param\w*|joint\s+(?:axis|line|points?)|"
                                                 r"\baxis\b|\bhinge\b", low)]
-    box_kw = [m.start() for m in re.finditer(r"bounding box|\bbbox\b|(?<![</])\bbox\b(?!>)|\blocated at\b",
-                                              low)]
+    box_kw = [m.start() for m in re.finditer(
+        r"bounding box|\bbbox\b|(?<![</])\bbox\b(?!>)|\blocated at\b", low)]
     for k, g in enumerate(groups):
         last_joint = max((p for p in joint_kw if p < g.pos), default=-1)
         last_box = max((p for p in box_kw if p < g.pos), default=-1)
@@ -268,7 +267,7 @@ def _part_from_text(index: int, segment: str) -> tuple[PartAnswer, list[_Coords]
             is_joint = (k == 0 and len(groups) > 1) and not g.tagged
         else:
             is_joint = last_joint > last_box
-        g.pos = -1 if is_joint else 1
+        g.role = "joint" if is_joint else "box"
     return part, groups
 
 
@@ -345,8 +344,8 @@ def _box(g: _Coords, system: str, width: int, height: int) -> tuple[np.ndarray |
 def _finish(part: PartAnswer, groups: list[_Coords], system: str, width: int, height: int
             ) -> PartAnswer:
     """Convert the part's groups to pixels and decide whether the part is usable."""
-    joint = next((g for g in groups if g.pos < 0), None)
-    box = next((g for g in groups if g.pos >= 0), None)
+    joint = next((g for g in groups if g.role == "joint"), None)
+    box = next((g for g in groups if g.role == "box"), None)
     if part.joint_type is None:
         part.joint_type = _TYPE_BY_LABEL.get(part.label.split()[-1].rstrip("s"))
     if box is None:
