@@ -155,12 +155,18 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
 def up_direction(capture: Capture) -> np.ndarray:
     """World "up" from the capture's cameras, which are held level: the direction perpendicular to
     all their right (x) axes, signed like their up (y) axes. When the right axes do not span a plane
-    (all cameras facing one way) the mean up axis is used."""
+    (all cameras facing one way), a world axis perpendicular to them and within 45 degrees of the
+    cameras' mean up axis (z-up and y-up worlds), else that mean up axis."""
     rot = np.array([f.camera.c2w[:3, :3] for f in capture.frames])
     rights, ups = rot[:, :, 0], rot[:, :, 1].sum(axis=0)
+    ups = ups / np.linalg.norm(ups)
     s, vt = np.linalg.svd(rights, full_matrices=False)[1:]
-    up = vt[2] if s[1] > 0.15 * s[0] else ups
-    up = up / np.linalg.norm(up)
+    if s[1] > 0.15 * s[0]:
+        up = vt[2]
+    else:
+        level = [a for a in np.eye(3) if abs(a @ vt[0]) < math.sin(math.radians(5))]
+        up = max(level, key=lambda a: abs(a @ ups), default=ups)
+        up = up if abs(up @ ups) > math.cos(math.radians(45)) else ups
     return -up if up @ ups < 0 else up
 
 

@@ -10,6 +10,7 @@ import json
 import math
 import threading
 import time
+from pathlib import Path
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Callable
 
@@ -593,3 +594,31 @@ def test_markdown_and_point_pairs_from_general_purpose_models():
     np.testing.assert_allclose(b.bbox, [53.76, 218.4, 394.24, 302.4])
     assert parse_classification("The object is a **refrigerator**. It has **2** movable parts.") == (
         "refrigerator", 2)
+
+
+def test_up_direction_from_level_cameras_with_and_without_spread():
+    from artgs.core.capture import Frame
+    from artgs.core.joints import rotation_about_axis
+    from artgs.core.propose_vlm import up_direction
+
+    R = np.eye(4)
+    R[:3, :3] = rotation_about_axis(np.array([0.2, 1.0, 0.4]), 2.2)  # a world that is not z-up
+    up = R[:3, :3] @ [0, 0, 1.0]
+
+    def capture(eyes):
+        K = intrinsics(4.0, 4.0, 2.0, 1.5)
+        frames = [Frame(k, f"f{k}", Camera(K, R @ look_at(np.array(e, float), np.zeros(3)), 4, 3),
+                        np.zeros((3, 4, 3), np.uint8), None, None) for k, e in enumerate(eyes)]
+        return Capture(Path("."), frames)
+
+    around = [[2 * math.cos(a), 2 * math.sin(a), 1.0 + 0.3 * (k % 2)] for k, a in
+              enumerate(np.linspace(-1.2, 1.2, 7))]
+    assert _deg(up_direction(capture(around)), up) < 1e-6
+    # all cameras facing one way (right axes parallel): the mean camera up, tilted by the elevation
+    one_way = [[2.0, 0.0, 1.0], [3.0, 0.0, 1.5]]
+    got = up_direction(capture(one_way))
+    assert 20 < _deg(got, up) < 35 and got @ up > 0
+    R[:3, :3] = rotation_about_axis(np.array([1.0, 0, 0]), -math.pi / 2)  # a y-up world
+    assert _deg(up_direction(capture(one_way)), [0, 1.0, 0]) < 1e-6
+    R[:3, :3] = np.eye(3)  # z-up
+    assert _deg(up_direction(capture(one_way)), [0, 0, 1.0]) < 1e-6
