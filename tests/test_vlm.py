@@ -10,8 +10,8 @@ import json
 import math
 import threading
 import time
-from pathlib import Path
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
 from typing import Callable
 
 import cv2
@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 import torch
 
+from artgs.core import lift
 from artgs.core.cameras import Camera, intrinsics, look_at
 from artgs.core.capture import Capture
 from artgs.core.errors import ArtgsError, InputError
-from artgs.core import lift
-from artgs.core.vlm_client import VlmConfig, chat, user_message, vlm_config
 from artgs.core.propose_vlm import box_within
+from artgs.core.vlm_client import VlmConfig, chat, user_message, vlm_config
 from artgs.core.vlm_parse import parse_classification, parse_handle, parse_parts, to_grid1000
 
 W, H = 160, 120
@@ -144,6 +144,29 @@ def test_qwen_json_in_a_fence_is_in_pixels():
     np.testing.assert_allclose(a.bbox, [40, 10, 120, 110])
     np.testing.assert_allclose(a.joint_points, [[40, 10], [40, 110]])
     assert (b.label, b.joint_type, b.skip) == ("drawer", "prismatic", None)  # type from the name
+
+
+def test_numbered_lists_and_labels_with_clauses():
+    text = ("1. The left part is a door that swings open (revolute); joint [[10, 10, 10, 110]], "
+            "bounding box [[10, 10, 80, 110]]\n"
+            "2. Part is a drawer which slides out; axis [[120, 60, 120, 62]], box [[90, 40, 150, 80]]")
+    a, b = parse_parts(text, W, H, "pixels")
+    assert (a.label, a.joint_type, a.skip) == ("door", "revolute", None)
+    assert (b.label, b.joint_type, b.skip) == ("drawer", "prismatic", None)
+    np.testing.assert_allclose(a.joint_points, [[10, 10], [10, 110]])
+    np.testing.assert_allclose(b.bbox, [90, 40, 150, 80])
+
+
+def test_markdown_and_point_pairs_from_general_purpose_models():
+    text = ("- **Part 1**: door (revolute), hinge from (120, 80) to (120, 600), bbox (120, 80, 480, 600)\n"
+            "- **Part 2**: drawer (prismatic), bbox (120, 650, 880, 900)")
+    a, b = parse_parts(text, 448, 336)
+    assert (a.label, a.joint_type, a.skip, b.label, b.joint_type, b.skip) == (
+        "door", "revolute", None, "drawer", "prismatic", None)
+    np.testing.assert_allclose(a.joint_points, [[53.76, 26.88], [53.76, 201.6]])
+    np.testing.assert_allclose(b.bbox, [53.76, 218.4, 394.24, 302.4])
+    assert parse_classification("The object is a **refrigerator**. It has **2** movable parts.") == (
+        "refrigerator", 2)
 
 
 def test_handle_answers_in_each_format():
@@ -271,6 +294,15 @@ def test_timeout_and_unreachable_and_bad_body_errors():
         chat(cfg(endpoint, retries=1), [user_message("hi")])  # server closed: connection refused
 
 
+def test_a_local_server_is_reached_without_the_environment_proxy(monkeypatch):
+    monkeypatch.setenv("http_proxy", "http://127.0.0.1:9")  # nothing listens there
+    monkeypatch.setenv("HTTP_PROXY", "http://127.0.0.1:9")
+    monkeypatch.delenv("no_proxy", raising=False)
+    monkeypatch.delenv("NO_PROXY", raising=False)
+    with FakeVlm(lambda body: (200, completion("direct"), 0)) as fake:
+        assert chat(cfg(fake.endpoint, retries=0), [user_message("hi")]) == "direct"
+
+
 # --- lifting against hand-made depth ---------------------------------------------------------------
 
 def _plane_depth(camera: Camera, point, normal) -> np.ndarray:
@@ -359,6 +391,48 @@ def test_robust_depth_prefers_the_near_layer_at_an_edge():
     z = lift.robust_depth(depth, np.array([[5.2, 5.0], [2.0, 5.0], [0.5, 0.5]]), radius=2)
     np.testing.assert_allclose(z, [1.0, 2.0, 2.0])
     assert lift.robust_depth(np.zeros((4, 4)), np.array([[1.0, 1.0]]))[0] == 0.0
+
+
+def test_snap_axis_only_within_its_angle():
+    n, up = np.array([1.0, 0, 0]), np.array([0, 0, 1.0])
+    tilt = lambda deg: np.array([0, math.sin(math.radians(deg)), math.cos(math.radians(deg))])
+    np.testing.assert_allclose(lift.snap_axis(tilt(5), n, up, "revolute"), up)
+    np.testing.assert_allclose(lift.snap_axis(-tilt(5), n, up, "revolute"), -up)
+    np.testing.assert_allclose(lift.snap_axis(tilt(12), n, up, "revolute"), tilt(12))
+    np.testing.assert_allclose(lift.snap_axis(tilt(87), n, up, "revolute"), [0, 1.0, 0], atol=1e-12)
+    drawer = _unit([1.0, 0, 0.1])
+    np.testing.assert_allclose(lift.snap_axis(drawer, drawer, up, "prismatic"), n)
+    lid = _unit([0, 0.05, 1.0])  # a lid facing up: every direction in it is level, none is snapped
+    np.testing.assert_allclose(lift.snap_axis(_unit([1, 0.1, 0]), lid, up, "revolute"),
+                               _unit([1, 0.1, 0]))
+
+
+def test_up_direction_from_level_cameras_with_and_without_spread():
+    from artgs.core.capture import Frame
+    from artgs.core.joints import rotation_about_axis
+    from artgs.core.propose_vlm import up_direction
+
+    R = np.eye(4)
+    R[:3, :3] = rotation_about_axis(np.array([0.2, 1.0, 0.4]), 2.2)  # a world that is not z-up
+    up = R[:3, :3] @ [0, 0, 1.0]
+
+    def capture(eyes):
+        K = intrinsics(4.0, 4.0, 2.0, 1.5)
+        frames = [Frame(k, f"f{k}", Camera(K, R @ look_at(np.array(e, float), np.zeros(3)), 4, 3),
+                        np.zeros((3, 4, 3), np.uint8), None, None) for k, e in enumerate(eyes)]
+        return Capture(Path("."), frames)
+
+    around = [[2 * math.cos(a), 2 * math.sin(a), 1.0 + 0.3 * (k % 2)] for k, a in
+              enumerate(np.linspace(-1.2, 1.2, 7))]
+    assert _deg(up_direction(capture(around)), up) < 1e-6
+    # all cameras facing one way (right axes parallel): the mean camera up, tilted by the elevation
+    one_way = [[2.0, 0.0, 1.0], [3.0, 0.0, 1.5]]
+    got = up_direction(capture(one_way))
+    assert 20 < _deg(got, up) < 35 and got @ up > 0
+    R[:3, :3] = rotation_about_axis(np.array([1.0, 0, 0]), -math.pi / 2)  # a y-up world
+    assert _deg(up_direction(capture(one_way)), [0, 1.0, 0]) < 1e-6
+    R[:3, :3] = np.eye(3)  # z-up
+    assert _deg(up_direction(capture(one_way)), [0, 0, 1.0]) < 1e-6
 
 
 # --- end to end on a synthetic object ----------------------------------------------------------------
@@ -548,77 +622,3 @@ def test_propose_vlm_skips_an_unparseable_part_and_keeps_the_others(cabinet):
     assert joints[0].handle is None  # the handle answer pointed outside the door
     assert any(e["event"] == "log" and "handle not used" in e["message"]
                and "not within the part's box" in e["message"] for e in events)
-
-
-def test_numbered_lists_and_labels_with_clauses():
-    text = ("1. The left part is a door that swings open (revolute); joint [[10, 10, 10, 110]], "
-            "bounding box [[10, 10, 80, 110]]\n"
-            "2. Part is a drawer which slides out; axis [[120, 60, 120, 62]], box [[90, 40, 150, 80]]")
-    a, b = parse_parts(text, W, H, "pixels")
-    assert (a.label, a.joint_type, a.skip) == ("door", "revolute", None)
-    assert (b.label, b.joint_type, b.skip) == ("drawer", "prismatic", None)
-    np.testing.assert_allclose(a.joint_points, [[10, 10], [10, 110]])
-    np.testing.assert_allclose(b.bbox, [90, 40, 150, 80])
-
-
-def test_snap_axis_only_within_its_angle():
-    n, up = np.array([1.0, 0, 0]), np.array([0, 0, 1.0])
-    tilt = lambda deg: np.array([0, math.sin(math.radians(deg)), math.cos(math.radians(deg))])
-    np.testing.assert_allclose(lift.snap_axis(tilt(5), n, up, "revolute"), up)
-    np.testing.assert_allclose(lift.snap_axis(-tilt(5), n, up, "revolute"), -up)
-    np.testing.assert_allclose(lift.snap_axis(tilt(12), n, up, "revolute"), tilt(12))
-    np.testing.assert_allclose(lift.snap_axis(tilt(87), n, up, "revolute"), [0, 1.0, 0], atol=1e-12)
-    drawer = _unit([1.0, 0, 0.1])
-    np.testing.assert_allclose(lift.snap_axis(drawer, drawer, up, "prismatic"), n)
-    lid = _unit([0, 0.05, 1.0])  # a lid facing up: every direction in it is level, none is snapped
-    np.testing.assert_allclose(lift.snap_axis(_unit([1, 0.1, 0]), lid, up, "revolute"),
-                               _unit([1, 0.1, 0]))
-
-
-def test_a_local_server_is_reached_without_the_environment_proxy(monkeypatch):
-    monkeypatch.setenv("http_proxy", "http://127.0.0.1:9")  # nothing listens there
-    monkeypatch.setenv("HTTP_PROXY", "http://127.0.0.1:9")
-    monkeypatch.delenv("no_proxy", raising=False)
-    monkeypatch.delenv("NO_PROXY", raising=False)
-    with FakeVlm(lambda body: (200, completion("direct"), 0)) as fake:
-        assert chat(cfg(fake.endpoint, retries=0), [user_message("hi")]) == "direct"
-
-
-def test_markdown_and_point_pairs_from_general_purpose_models():
-    text = ("- **Part 1**: door (revolute), hinge from (120, 80) to (120, 600), bbox (120, 80, 480, 600)\n"
-            "- **Part 2**: drawer (prismatic), bbox (120, 650, 880, 900)")
-    a, b = parse_parts(text, 448, 336)
-    assert (a.label, a.joint_type, a.skip, b.label, b.joint_type, b.skip) == (
-        "door", "revolute", None, "drawer", "prismatic", None)
-    np.testing.assert_allclose(a.joint_points, [[53.76, 26.88], [53.76, 201.6]])
-    np.testing.assert_allclose(b.bbox, [53.76, 218.4, 394.24, 302.4])
-    assert parse_classification("The object is a **refrigerator**. It has **2** movable parts.") == (
-        "refrigerator", 2)
-
-
-def test_up_direction_from_level_cameras_with_and_without_spread():
-    from artgs.core.capture import Frame
-    from artgs.core.joints import rotation_about_axis
-    from artgs.core.propose_vlm import up_direction
-
-    R = np.eye(4)
-    R[:3, :3] = rotation_about_axis(np.array([0.2, 1.0, 0.4]), 2.2)  # a world that is not z-up
-    up = R[:3, :3] @ [0, 0, 1.0]
-
-    def capture(eyes):
-        K = intrinsics(4.0, 4.0, 2.0, 1.5)
-        frames = [Frame(k, f"f{k}", Camera(K, R @ look_at(np.array(e, float), np.zeros(3)), 4, 3),
-                        np.zeros((3, 4, 3), np.uint8), None, None) for k, e in enumerate(eyes)]
-        return Capture(Path("."), frames)
-
-    around = [[2 * math.cos(a), 2 * math.sin(a), 1.0 + 0.3 * (k % 2)] for k, a in
-              enumerate(np.linspace(-1.2, 1.2, 7))]
-    assert _deg(up_direction(capture(around)), up) < 1e-6
-    # all cameras facing one way (right axes parallel): the mean camera up, tilted by the elevation
-    one_way = [[2.0, 0.0, 1.0], [3.0, 0.0, 1.5]]
-    got = up_direction(capture(one_way))
-    assert 20 < _deg(got, up) < 35 and got @ up > 0
-    R[:3, :3] = rotation_about_axis(np.array([1.0, 0, 0]), -math.pi / 2)  # a y-up world
-    assert _deg(up_direction(capture(one_way)), [0, 1.0, 0]) < 1e-6
-    R[:3, :3] = np.eye(3)  # z-up
-    assert _deg(up_direction(capture(one_way)), [0, 0, 1.0]) < 1e-6
