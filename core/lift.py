@@ -167,6 +167,16 @@ def snap_axis(axis: np.ndarray, normal: np.ndarray, up: np.ndarray, kind: str,
     return axis
 
 
+def handle_reach(camera: Camera, box: np.ndarray, plane: Plane, axis: np.ndarray,
+                 origin: np.ndarray, point: np.ndarray) -> float:
+    """Distance of ``point`` (the handle) from the hinge line, over that of the part's farthest box
+    corner: near 1 for a handle at the free edge, near 0 for one beside the hinge."""
+    x1, y1, x2, y2 = np.asarray(box, float)
+    corners = on_plane(camera, np.array([[x1, y1], [x2, y1], [x2, y2], [x1, y2]]), plane)
+    radial = np.linalg.norm(np.cross(np.vstack([corners, point]) - origin, axis), axis=1)
+    return float(radial[-1] / max(radial[:-1].max(), 1e-9))
+
+
 def opening_sign(axis: np.ndarray, origin: np.ndarray, part_center: np.ndarray,
                  towards: np.ndarray) -> np.ndarray:
     """``axis`` flipped if needed so a positive rotation moves ``part_center`` along ``towards``."""

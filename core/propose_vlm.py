@@ -38,6 +38,7 @@ MIN_ALPHA = 0.5        # rendered pixels less opaque than this carry no depth
 BACKGROUND = (1.0, 1.0, 1.0)
 REVOLUTE_LIMIT = (0.0, math.pi / 2)
 PRISMATIC_TRAVEL = 0.75  # proposed drawer travel, times the width of its front
+HANDLE_REACH = 0.35    # a handle nearer the hinge than this share of the part halves confidence
 
 
 def propose_vlm(capture: Capture, gaussians: Gaussians, progress: Progress, config: VlmConfig,
@@ -143,6 +144,13 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
         return _skip(progress, skipped, f"part {part.index} ({part.label}): degenerate geometry "
                      f"from its box {_r(part.bbox)}")
     confidence = plane.coverage * (1.0 if trusted else 0.6)
+    if part.joint_type == "revolute" and handle is not None:
+        reach = lift.handle_reach(camera, part.bbox, plane, axis, origin, np.array(handle["point"]))
+        if reach < HANDLE_REACH:
+            confidence *= 0.5
+            progress.log(f"part {part.index} ({part.label}): the handle is beside the hinge line "
+                         f"({reach:.0%} of the part's reach); the hinge may be on the other side",
+                         "warning")
     extra: dict[str, Any] = {"label": part.label}
     if part.joint_points is not None:
         extra["joint_points"] = part.joint_points.round(2).tolist()

@@ -472,9 +472,10 @@ def _grid(values, camera: Camera) -> str:
 
 
 def _canned_answers(camera: Camera, joints, broken: int | None = None,
-                    stray_handles: bool = False) -> Callable:
+                    stray_handles: bool = False, wrong_side: bool = False) -> Callable:
     """A server answering the three questions from the ground truth projected into ``camera``;
-    part ``broken`` gets an unreadable box, ``stray_handles`` puts handles outside their parts."""
+    part ``broken`` gets an unreadable box, ``stray_handles`` puts handles outside their parts,
+    ``wrong_side`` puts revolute hinges on the part's opposite edge."""
     lines, boxes, handles = [], [], []
     for n, j in enumerate(joints, 1):
         box = _front_box(camera, j)
@@ -489,7 +490,9 @@ def _canned_answers(camera: Camera, joints, broken: int | None = None,
             e = j.extent
             reach = np.abs(np.array(e["axes"]) @ j.axis) @ np.array(e["half_size"])
             ts = (np.array(e["center"]) - j.origin) @ j.axis + np.array([-1, 1]) * reach
-            points, _ = camera.project(j.origin + ts[:, None] * j.axis)
+            offset = 2 * (np.array(e["center"]) - j.origin) if wrong_side else 0.0
+            offset = offset - (offset @ j.axis) * j.axis if wrong_side else 0.0
+            points, _ = camera.project(j.origin + offset + ts[:, None] * j.axis)
         else:
             points = np.array([box[:2] + box[2:], box[:2] + box[2:]]) / 2 + [[0, -1], [0, 1]]
         label = "door" if j.type == "revolute" else "drawer"
@@ -622,3 +625,24 @@ def test_propose_vlm_skips_an_unparseable_part_and_keeps_the_others(cabinet):
     assert joints[0].handle is None  # the handle answer pointed outside the door
     assert any(e["event"] == "log" and "handle not used" in e["message"]
                and "not within the part's box" in e["message"] for e in events)
+
+
+def test_a_handle_beside_the_hinge_line_lowers_confidence(cabinet):
+    import io
+
+    from artgs.core.progress import Progress
+    from artgs.core.propose_vlm import frontal_camera, propose_vlm
+
+    capture, gaussians, gt = cabinet
+    camera = frontal_camera(capture, gaussians.means.numpy().astype(float), W, H)
+    results = {}
+    for wrong in (False, True):
+        with FakeVlm(_canned_answers(camera, gt, wrong_side=wrong)) as fake:
+            stream = io.StringIO()
+            joints, _ = propose_vlm(capture, gaussians, Progress("json", stream=stream),
+                                    VlmConfig(endpoint=fake.endpoint, model="m", width=W, height=H))
+        results[wrong] = ({j.type: j.confidence for j in joints}, stream.getvalue())
+    (good, good_log), (bad, bad_log) = results[False], results[True]
+    assert good["revolute"] > 0.8 and "beside the hinge" not in good_log
+    assert bad["revolute"] < 0.55 * good["revolute"] and "beside the hinge" in bad_log
+    assert bad["prismatic"] == good["prismatic"]
