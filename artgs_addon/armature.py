@@ -1,0 +1,386 @@
+"""Joints as an editable Blender armature, and the (edited) joints read back from it.
+
+One armature object per articulated object, one bone per joint, named after the joint. The bone IS
+the joint axis: head = the joint origin (a point on the hinge line; for a prismatic joint a point of
+the moving part), tail = head + axis * length. Roll carries no meaning. In pose mode a revolute
+bone only rotates about its own Y axis (head to tail) and a prismatic bone only slides along it,
+within the limits (channel locks plus a Limit Rotation / Limit Location constraint in local space).
+Revolute bones are blue, prismatic bones green.
+
+Each bone keeps the joint as built (or last saved) as JSON in ``Bone.artgs_joint.built``:
+``read_joints`` returns it unchanged while the bone still matches it, otherwise the joint read from
+the bone with ``source: "user"`` and the other fields (extent, handle, states ...) kept.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+from ..core.errors import ArtgsError, InputError
+from ..core.joints import Articulation, Joint, read_articulation, write_articulation
+from ..core.parts import assign_parts
+from .bone_props import ArtgsJointProps
+
+SIZE_KEY = "artgs_size"    # on the armature data: object size in metres; marks ArtGS armatures
+META_KEY = "artgs_meta"    # on the armature data: the joints file's top-level fields (JSON)
+BONE_LENGTH = 0.25         # bone length as a fraction of the object size
+COLOURS = {"revolute": "THEME04", "prismatic": "THEME03"}  # bone colour palettes: blue, green
+CONSTRAINT = "ArtGS Limit"
+MODIFIER = "ArtGS Joints"
+NEW_LIMITS = {"revolute": (0.0, math.pi / 2), "prismatic": (0.0, 0.5)}  # prismatic: x object size
+_MAX_NAME_BYTES = 63       # Blender truncates longer bone names
+_FIX_SCALE = "Object > Apply > Scale (Ctrl+A)"
+
+
+def is_joint_armature(obj: bpy.types.Object | None) -> bool:
+    """Whether ``obj`` is an armature made by ``build_armature``."""
+    return obj is not None and obj.type == "ARMATURE" and SIZE_KEY in obj.data
+
+
+def find_armature(context: bpy.types.Context) -> bpy.types.Object | None:
+    """The joints armature to work on: the active one, the active preview's, else the scene's first."""
+    obj = context.active_object
+    if is_joint_armature(obj):
+        return obj
+    if obj is not None and is_joint_armature(obj.parent):
+        return obj.parent
+    return next((o for o in context.scene.objects if is_joint_armature(o)), None)
+
+
+def previews_of(obj: bpy.types.Object) -> list[bpy.types.Object]:
+    """Mesh objects deformed by the armature ``obj``."""
+    return [o for o in bpy.data.objects if o.type == "MESH"
+            and any(m.type == "ARMATURE" and m.object == obj for m in o.modifiers)]
+
+
+def check_transform(obj: bpy.types.Object) -> None:
+    """Refuse a zero or negative (mirroring) scale: rotations would turn the wrong way."""
+    det = float(np.linalg.det(np.array(obj.matrix_world)[:3, :3]))
+    if not det > 1e-12:
+        scale = tuple(round(v, 4) for v in obj.matrix_world.to_scale())
+        kind = "a negative (mirroring)" if det < 0 else "a zero"
+        raise ArtgsError(f"Armature '{obj.name}' has {kind} scale {scale}, so its joints would turn "
+                         f"the wrong way; apply the scale first: {_FIX_SCALE}")
+
+
+def build_armature(context: bpy.types.Context, articulation: Articulation,
+                   preview: bpy.types.Object | None = None, size: float = 1.0,
+                   name: str = "ArtGS Joints") -> bpy.types.Object:
+    """Create, or rebuild in place, the armature ``name`` with one bone per joint (world frame).
+
+    A rebuilt armature keeps its object transform: bones are placed so the joints are right in the
+    world. With ``preview`` (a mesh whose vertices are the object's points), each joint's points
+    (``core.parts.assign_parts``) go to a vertex group named after its bone and an Armature
+    modifier deforms them, so posing a bone moves its part; the preview is parented to the armature.
+    """
+    if not (math.isfinite(size) and size > 0):
+        raise ArtgsError(f"object size must be a positive number of metres, not {size}")
+    for joint in articulation.joints:
+        if len(joint.name.encode("utf-8")) > _MAX_NAME_BYTES:
+            raise ArtgsError(f"joint '{joint.name}': name longer than {_MAX_NAME_BYTES} bytes, "
+                             f"too long for a Blender bone; rename it")
+    if preview is not None and preview.type != "MESH":
+        raise ArtgsError(f"preview '{preview.name}' must be a mesh object, not {preview.type}")
+    obj = bpy.data.objects.get(name)
+    if not is_joint_armature(obj):
+        obj = bpy.data.objects.new(name, bpy.data.armatures.new(name))
+        context.collection.objects.link(obj)
+        obj.show_in_front = True
+    context.view_layer.update()
+    check_transform(obj)
+    arm = obj.data
+    arm[SIZE_KEY] = float(size)
+    arm[META_KEY] = json.dumps(articulation.meta)
+    old_names = [b.name for b in arm.bones]
+    to_arm = obj.matrix_world.inverted()
+    by_link = {j.child: j.name for j in articulation.joints}
+    with edit_mode(context, obj) as bones:
+        for eb in list(bones):
+            bones.remove(eb)
+        for joint in articulation.joints:
+            eb = bones.new(joint.name)
+            _place(eb, to_arm, joint.origin, joint.axis, BONE_LENGTH * size)
+            _fill(eb.artgs_joint, joint)
+        for joint in articulation.joints:
+            parent = by_link.get(joint.parent)
+            if parent is not None and parent != joint.name:
+                bones[joint.name].parent = bones[parent]
+    for bone in arm.bones:
+        refresh_bone(obj, bone.name)
+        set_joint_value(obj, bone.name, 0.0)
+    if preview is not None:
+        _bind_preview(obj, preview, articulation.joints, old_names)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+    return obj
+
+
+def read_joints(obj: bpy.types.Object) -> list[Joint]:
+    """The joints of the armature ``obj`` in the world frame, edits included (also in edit mode)."""
+    if not is_joint_armature(obj):
+        raise ArtgsError(f"'{obj.name}' is not an ArtGS joints armature")
+    check_transform(obj)
+    if obj.mode == "EDIT":
+        obj.update_from_editmode()
+    size = float(obj.data[SIZE_KEY])
+    M = np.array(obj.matrix_world)
+    return [_read_bone(M, bone, size) for bone in obj.data.bones]
+
+
+def joint_of_bone(obj: bpy.types.Object, name: str) -> Joint:
+    """The joint drawn by bone ``name`` (rest pose, world frame), ignoring what was built."""
+    return _bone_joint(np.array(obj.matrix_world), obj.data.bones[name])
+
+
+def add_joint(context: bpy.types.Context, obj: bpy.types.Object, origin, axis=(0.0, 0.0, 1.0),
+              joint_type: str = "revolute", name: str = "joint") -> str:
+    """Add a user joint at world ``origin`` along world ``axis``; returns its (unique) bone name."""
+    check_transform(obj)
+    size = float(obj.data[SIZE_KEY])
+    to_arm = obj.matrix_world.inverted()
+    lower, upper = NEW_LIMITS[joint_type]
+    if joint_type == "prismatic":
+        lower, upper = lower * size, upper * size
+    with edit_mode(context, obj) as bones:
+        eb = bones.new(name)
+        _place(eb, to_arm, np.asarray(origin, float), np.asarray(axis, float), BONE_LENGTH * size)
+        props = eb.artgs_joint
+        props.joint_type = joint_type
+        props.lower, props.upper = lower, upper
+        props.parent_link, props.child_link, props.source = "base", f"{eb.name}_link", "user"
+        eb.color.palette = COLOURS[joint_type]
+        for other in bones:
+            other.select = other.select_head = other.select_tail = False
+        eb.select = eb.select_head = eb.select_tail = True
+        bones.active = eb
+        name = eb.name
+    refresh_bone(obj, name)
+    return name
+
+
+def remove_joint(context: bpy.types.Context, obj: bpy.types.Object, name: str) -> None:
+    """Remove joint (bone) ``name``; its points go back to the base in the previews."""
+    if name not in obj.data.bones and not (obj.mode == "EDIT" and name in obj.data.edit_bones):
+        raise ArtgsError(f"no joint named '{name}' in '{obj.name}'")
+    with edit_mode(context, obj) as bones:
+        bones.remove(bones[name])
+    for preview in previews_of(obj):
+        group = preview.vertex_groups.get(name)
+        if group is not None:
+            preview.vertex_groups.remove(group)
+
+
+def save_joints(obj: bpy.types.Object, path: str | Path) -> list[Joint]:
+    """Write the armature's joints to ``path`` atomically, keeping the file's other fields.
+
+    The saved joints become the new reference: they read back unchanged until edited again.
+    """
+    joints = read_joints(obj)
+    path = Path(path)
+    meta = json.loads(obj.data.get(META_KEY, "{}"))
+    if path.is_file():
+        try:
+            meta = read_articulation(path).meta
+        except InputError:
+            pass  # an unreadable file is replaced; the armature's stored fields are used
+    write_articulation(path, Articulation(joints, meta))
+    obj.data[META_KEY] = json.dumps(meta)
+    by_name = {j.name: j for j in joints}
+    bones = obj.data.edit_bones if obj.mode == "EDIT" else obj.data.bones
+    for bone in bones:
+        joint = by_name[bone.name]
+        bone.artgs_joint.built = json.dumps(joint.to_dict())
+        bone.artgs_joint.source = joint.source or "user"
+    return joints
+
+
+def set_joint_value(obj: bpy.types.Object, name: str, value: float) -> None:
+    """Pose bone ``name`` at joint value ``value`` (radians, or metres in the world)."""
+    pb = obj.pose.bones[name]
+    pb.location = (0.0, 0.0, 0.0)
+    pb.rotation_euler = (0.0, 0.0, 0.0)
+    pb.rotation_quaternion = (1.0, 0.0, 0.0, 0.0)
+    pb.scale = (1.0, 1.0, 1.0)
+    if obj.data.bones[name].artgs_joint.joint_type == "revolute":
+        pb.rotation_euler = (0.0, value, 0.0)
+    else:
+        pb.location = (0.0, value / _world_per_unit(obj, name), 0.0)
+
+
+def refresh_bone(obj: bpy.types.Object, name: str, props: ArtgsJointProps | None = None) -> None:
+    """Set bone ``name``'s pose locks, limit constraint and colour from its joint settings.
+
+    ``props`` are the settings to use (default: the bone's; in edit mode, the edit bone's).
+    """
+    bone = obj.data.bones.get(name)
+    pb = obj.pose.bones.get(name)
+    if bone is None or pb is None:
+        return  # a bone added in edit mode gets its pose bone when edit mode ends
+    if props is None:
+        props = bone.artgs_joint
+        bone.color.palette = COLOURS[props.joint_type]
+    revolute = props.joint_type == "revolute"
+    pb.rotation_mode = "XYZ"
+    pb.lock_location = (True, revolute, True)
+    pb.lock_rotation = (True, not revolute, True)
+    pb.lock_rotation_w = True
+    pb.lock_scale = (True, True, True)
+    for con in [c for c in pb.constraints if c.name.startswith(CONSTRAINT)]:
+        pb.constraints.remove(con)
+    # every channel is limited (locks only guide the interactive tools): zero but the joint's own
+    rot = pb.constraints.new("LIMIT_ROTATION")
+    rot.name = f"{CONSTRAINT} Rotation"
+    rot.use_limit_x = rot.use_limit_y = rot.use_limit_z = True
+    loc = pb.constraints.new("LIMIT_LOCATION")
+    loc.name = f"{CONSTRAINT} Location"
+    for axis in "xyz":
+        setattr(loc, f"use_min_{axis}", True)
+        setattr(loc, f"use_max_{axis}", True)
+    if revolute:
+        rot.min_y, rot.max_y = props.lower, props.upper
+    else:
+        unit = _world_per_unit(obj, name)
+        loc.min_y, loc.max_y = props.lower / unit, props.upper / unit
+    for con in (rot, loc):
+        con.owner_space = "LOCAL"
+        con.use_transform_limit = True
+
+
+def refresh_joint_bone(props: ArtgsJointProps) -> None:
+    """Update callback of the joint settings: refresh the bone they belong to, in every user."""
+    arm = props.id_data
+    if not isinstance(arm, bpy.types.Armature):
+        return
+    ptr = props.as_pointer()
+    owner = next((b for b in (*arm.edit_bones, *arm.bones) if b.artgs_joint.as_pointer() == ptr),
+                 None)
+    if owner is None:
+        return
+    owner.color.palette = COLOURS[props.joint_type]
+    for obj in bpy.data.objects:
+        if obj.data == arm and obj.pose is not None:
+            refresh_bone(obj, owner.name, props)
+
+
+@contextmanager
+def edit_mode(context: bpy.types.Context, obj: bpy.types.Object) -> Iterator:
+    """Edit the bones of ``obj`` (yields its edit bones), then return to its previous mode.
+
+    Edit mode is always left once so new bones get their pose bones; the armature ends up active.
+    """
+    if not obj.visible_get(view_layer=context.view_layer):
+        raise ArtgsError(f"Armature '{obj.name}' is hidden or not in this view layer; show it "
+                         f"(Object > Show/Hide > Show Hidden Objects, Alt+H) to edit its joints")
+    previous = obj.mode
+    if context.view_layer.objects.active is not obj and context.mode != "OBJECT":
+        bpy.ops.object.mode_set(mode="OBJECT")
+    context.view_layer.objects.active = obj
+    if previous != "EDIT":
+        bpy.ops.object.mode_set(mode="EDIT")
+    try:
+        yield obj.data.edit_bones
+    finally:
+        bpy.ops.object.mode_set(mode="OBJECT")
+        if previous in ("EDIT", "POSE"):
+            bpy.ops.object.mode_set(mode=previous)
+
+
+def _place(eb: bpy.types.EditBone, to_arm: Matrix, origin: np.ndarray, axis: np.ndarray,
+           length: float) -> None:
+    """Put edit bone ``eb`` on the world-frame line from ``origin`` along ``axis``."""
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    eb.head = to_arm @ Vector(origin)
+    eb.tail = to_arm @ Vector(np.asarray(origin, float) + axis * length)
+    eb.roll = 0.0
+    eb.use_deform = True
+
+
+def _fill(props: ArtgsJointProps, joint: Joint) -> None:
+    props.joint_type = joint.type
+    props.lower, props.upper = joint.limit
+    props.parent_link = joint.parent
+    props.child_link = joint.child
+    props.source = joint.source or "user"
+    props.built = json.dumps(joint.to_dict())
+
+
+def _read_bone(M: np.ndarray, bone: bpy.types.Bone, size: float) -> Joint:
+    props = bone.artgs_joint
+    joint = _bone_joint(M, bone)
+    if not props.built:
+        return joint
+    built = Joint.from_dict(json.loads(props.built), f"bone '{bone.name}'")
+    if _same(joint, built, size):
+        if props.source != (built.source or "user"):
+            built.source = props.source
+        return built
+    for key in ("states", "confidence", "bbox", "handle", "extent", "extra"):
+        setattr(joint, key, getattr(built, key))
+    return joint
+
+
+def _bone_joint(M: np.ndarray, bone: bpy.types.Bone) -> Joint:
+    """The joint drawn by ``bone`` under the object matrix ``M`` (4x4)."""
+    head = M[:3, :3] @ np.array(bone.head_local) + M[:3, 3]
+    tail = M[:3, :3] @ np.array(bone.tail_local) + M[:3, 3]
+    p = bone.artgs_joint
+    if p.lower > p.upper:
+        raise ArtgsError(f"joint '{bone.name}': lower limit {p.lower:g} is above the upper limit "
+                         f"{p.upper:g}; fix it in the Bones panel")
+    return Joint(name=bone.name, type=p.joint_type, axis=tail - head, origin=head,
+                 limit=(p.lower, p.upper), parent=p.parent_link or "base",
+                 child=p.child_link or f"{bone.name}_link", source="user")
+
+
+def _same(a: Joint, b: Joint, size: float) -> bool:
+    """Same joint up to the float32 precision of bones and properties."""
+    tol_pos = 1e-5 * max(1.0, size, float(np.abs(b.origin).max()))
+    return (a.name == b.name and a.type == b.type and a.parent == b.parent and a.child == b.child
+            and float(np.linalg.norm(a.axis - b.axis)) < 1e-5
+            and float(np.linalg.norm(a.origin - b.origin)) <= tol_pos
+            and all(abs(x - y) <= 1e-6 * max(1.0, abs(y)) for x, y in zip(a.limit, b.limit)))
+
+
+def _world_per_unit(obj: bpy.types.Object, name: str) -> float:
+    """World metres per armature unit along bone ``name`` (its pose Y axis)."""
+    bone = obj.data.bones[name]
+    direction = (bone.tail_local - bone.head_local).normalized()
+    return (obj.matrix_world.to_3x3() @ direction).length
+
+
+def _bind_preview(obj: bpy.types.Object, preview: bpy.types.Object, joints: list[Joint],
+                  old_names: list[str]) -> None:
+    """Vertex groups from the part labels, an Armature modifier, and parenting to ``obj``."""
+    mesh = preview.data
+    co = np.empty(3 * len(mesh.vertices), np.float32)
+    mesh.vertices.foreach_get("co", co)
+    Mw = np.array(preview.matrix_world)
+    labels = assign_parts(co.reshape(-1, 3) @ Mw[:3, :3].T + Mw[:3, 3], joints)
+    for name in set(old_names) | {j.name for j in joints}:
+        group = preview.vertex_groups.get(name)
+        if group is not None:
+            preview.vertex_groups.remove(group)
+    for i, joint in enumerate(joints):
+        group = preview.vertex_groups.new(name=joint.name)
+        members = np.flatnonzero(labels == i + 1)
+        if len(members):
+            group.add(members.tolist(), 1.0, "REPLACE")
+    for mod in [m for m in preview.modifiers if m.type == "ARMATURE" and m.object == obj]:
+        preview.modifiers.remove(mod)
+    mod = preview.modifiers.new(MODIFIER, "ARMATURE")
+    mod.object = obj
+    mod.use_vertex_groups = True
+    mod.use_bone_envelopes = False
+    world = preview.matrix_world.copy()
+    preview.parent = obj
+    preview.parent_type = "OBJECT"
+    preview.matrix_parent_inverse = obj.matrix_world.inverted()
+    preview.matrix_basis = world
