@@ -51,7 +51,7 @@ class VlmConfig:
     timeout: float = 60.0
     retries: int = 2
     backoff: float = 1.0
-    max_tokens: int = 512
+    max_tokens: int = 1024
     width: int = 448
     height: int = 336
     coords: str = "auto"
