@@ -1,0 +1,307 @@
+"""Static reconstruction: a Gaussian splat from the capture's static RGB-D views -> OUT/splat.ply.
+
+1. Initialise from the back-projected masked depth of every training view, voxel-downsampled
+   (:func:`initial_splats`): colour from the pixels (SH DC), isotropic scale from the pixel
+   footprint (depth / focal), identity rotation, opacity 0.9.
+2. Optimise with Adam (per-parameter learning rates as in 3DGS, means' rate decaying) one random
+   training view per step: ``L1 + 0.2 (1 - SSIM)`` of the render (black background) against the
+   masked image, ``+ depth L1`` (alpha-normalised expected depth vs measured depth, where measured
+   and inside the mask, relative to the object size), ``+ alpha L1`` against the mask (keeps the
+   background empty); densify (clone/split on view-space gradient) and prune (core/densify.py).
+3. Stop when the training loss plateaus (relative drop over a window below a tolerance) or at
+   the iteration cap; write OUT/splat.ply atomically (a cancel or crash leaves the previous one).
+
+Held-out evaluation (``holdout`` = K evenly spaced static views, never trained on):
+- PSNR of the object pixels: the render over a black background vs the captured image, MSE over
+  the 3 channels of the pixels inside the mask (values in [0,1]), ``PSNR = -10 log10(MSE)``;
+- depth MAE: mean |rendered depth - measured depth| in mm over pixels inside the mask with a
+  valid measured depth (rendered depth is 0 where nothing was rendered; those count).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from . import outdir
+from .adam import Adam
+from .capture import Capture, Frame, load_capture
+from .densify import DensifyConfig, Densifier
+from .device import resolve_device
+from .errors import InputError
+from .ply import SplatArrays, write_ply
+from .progress import Progress
+from .rasterize import rasterize
+from .sh import rgb_to_sh0
+from .ssim import ssim
+
+STAGE = "reconstruct"
+
+
+@dataclass
+class ReconstructConfig:
+    """Optimisation settings (defaults tuned on the synthetic benchmark, 160x120, 24 views)."""
+
+    max_iterations: int = 3000          # cap when no explicit iteration count is given
+    sh_degree: int = 1
+    lambda_ssim: float = 0.2
+    lambda_depth: float = 1.0           # weight of depth L1 measured in units of 1% of the object size
+    lambda_alpha: float = 0.5
+    init_opacity: float = 0.9
+    voxel_pixels: float = 1.0           # init voxel = this many median pixel footprints
+    init_scale: float = 0.5             # init standard deviation, in pixel footprints
+    lr_means: float = 1.6e-4            # x object size, decaying to 1% of it
+    lr_sh0: float = 2.5e-3
+    lr_shN: float = 2.5e-3 / 20
+    lr_opacity: float = 0.05
+    lr_scales: float = 5e-3
+    lr_quats: float = 1e-3
+    densify_every: int = 100
+    densify_from: int = 100
+    densify_until: float = 0.6          # fraction of the cap
+    densify: DensifyConfig = field(default_factory=DensifyConfig)
+    plateau_window: int = 200           # iterations per convergence check
+    plateau_tol: float = 0.005          # stop when the window mean loss drops by less than this
+    seed: int = 0
+
+
+# --- views ---------------------------------------------------------------------------------------
+
+def holdout_indices(n: int, k: int) -> list[int]:
+    """``k`` evenly spaced view indices out of ``n`` (the held-out views)."""
+    if k <= 0:
+        return []
+    return sorted({min(n - 1, int((i + 0.5) * n / k)) for i in range(k)})
+
+
+@dataclass
+class _View:
+    """One static view as tensors."""
+
+    index: int              # position in capture.static
+    K: torch.Tensor
+    w2c: torch.Tensor
+    width: int
+    height: int
+    rgb: torch.Tensor       # (H,W,3) in [0,1], zero outside the mask
+    mask: torch.Tensor      # (H,W) float 0/1
+    depth: torch.Tensor     # (H,W) metres, 0 = no measurement
+    depth_valid: torch.Tensor  # (H,W) bool: measured and inside the mask
+
+
+def _view(index: int, f: Frame, device: torch.device) -> _View:
+    def t(a: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32, device=device)
+    h, w = f.rgb.shape[:2]
+    mask = np.ones((h, w), bool) if f.mask is None else f.mask.astype(bool)
+    depth = np.zeros((h, w), np.float32) if f.depth is None else np.nan_to_num(f.depth)
+    rgb = f.rgb.astype(np.float32) / 255.0 * mask[..., None]
+    return _View(index, t(f.camera.K), t(f.camera.w2c), w, h, t(rgb), t(mask), t(depth),
+                 torch.as_tensor(mask & (depth > 0), device=device))
+
+
+def _render(params: dict[str, torch.Tensor], v: _View, backend: str):
+    return rasterize(params["means"], params["quats"], params["log_scales"],
+                     params["opacity_logits"], torch.cat([params["sh0"], params["shN"]], 1),
+                     v.K, v.w2c, v.width, v.height, None, backend)
+
+
+# --- initialisation ------------------------------------------------------------------------------
+
+def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: float = 1.0,
+                   scale: float = 0.5, opacity: float = 0.9) -> tuple[SplatArrays, float]:
+    """Gaussians from the frames' back-projected masked depth, voxel-downsampled.
+
+    Returns the splat and the voxel size (metres) = ``voxel_pixels`` median pixel footprints
+    (footprint = depth / focal). Each voxel's Gaussian sits at the mean of its points, with their
+    mean colour and an isotropic standard deviation of ``scale`` times their mean footprint.
+    """
+    pts, cols, foot = [], [], []
+    for f in frames:
+        if f.depth is None:
+            continue
+        world, idx = f.camera.backproject(f.depth, f.mask)
+        focal = math.sqrt(f.camera.K[0, 0] * f.camera.K[1, 1])
+        pts.append(world)
+        cols.append(f.rgb.reshape(-1, 3)[idx].astype(np.float64) / 255.0)
+        foot.append(f.depth.reshape(-1)[idx].astype(np.float64) / focal)
+    if not pts or sum(len(p) for p in pts) == 0:
+        raise InputError("capture", "no masked depth pixels in the static views to start from",
+                         field="depth_file_path")
+    P, C, S = np.concatenate(pts), np.concatenate(cols), np.concatenate(foot)
+    voxel = float(voxel_pixels * np.median(S))
+    cell = np.floor((P - P.min(0)) / voxel).astype(np.int64)
+    dims = cell.max(0) + 1
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    _, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+
+    def mean(a: np.ndarray) -> np.ndarray:
+        cols_ = [np.bincount(inv, weights=a[:, i]) for i in range(a.shape[1])]
+        return np.stack(cols_, -1) / counts[:, None]
+
+    n = len(counts)
+    means, colour, sigma = mean(P), mean(C), scale * mean(S[:, None])[:, 0]
+    k = (sh_degree + 1) ** 2
+    sh = np.zeros((n, k, 3), np.float32)
+    sh[:, 0] = rgb_to_sh0(torch.as_tensor(colour)).numpy()
+    splats = SplatArrays(
+        means=means.astype(np.float32),
+        quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
+        log_scales=np.repeat(np.log(sigma)[:, None], 3, 1).astype(np.float32),
+        opacity_logits=np.full(n, math.log(opacity / (1 - opacity)), np.float32),
+        sh=sh)
+    return splats, voxel
+
+
+# --- evaluation ----------------------------------------------------------------------------------
+
+@torch.no_grad()
+def evaluate(params: dict[str, torch.Tensor], views: list[_View], backend: str) -> dict[str, float]:
+    """PSNR of the object pixels (dB) and depth MAE (mm) over ``views`` (see the module doc)."""
+    se, n_px, ae, n_d = 0.0, 0, 0.0, 0
+    for v in views:
+        out = _render(params, v, backend)
+        m = v.mask.bool()
+        se += float(((out.rgb - v.rgb)[m] ** 2).sum())
+        n_px += 3 * int(m.sum())
+        ae += float((out.depth - v.depth)[v.depth_valid].abs().sum())
+        n_d += int(v.depth_valid.sum())
+    mse = se / max(n_px, 1)
+    return {"psnr": -10 * math.log10(max(mse, 1e-12)), "depth_mae_mm": 1000 * ae / max(n_d, 1)}
+
+
+# --- optimisation --------------------------------------------------------------------------------
+
+def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
+                iterations: int | None = None, holdout: int = 0, device: str = "auto",
+                backend: str = "auto", config: ReconstructConfig | None = None) -> dict[str, Any]:
+    """Optimise a splat from ``capture``'s static views and write OUT/splat.ply.
+
+    ``iterations``: fixed iteration count (no early stop); None = until converged (at most
+    ``config.max_iterations``). ``holdout``: number of evenly spaced static views held out and
+    evaluated. Returns the figures (also the ones recorded in report.json).
+    """
+    cfg = config or ReconstructConfig()
+    static = capture.static
+    if not static:
+        raise InputError(capture.root, "no static frames to reconstruct from", field="phase")
+    if holdout < 0 or holdout > len(static) - 1:
+        raise InputError(capture.root, f"holdout must be 0..{len(static) - 1} "
+                         f"(there are {len(static)} static views), not {holdout}", field="holdout")
+    if iterations is not None and iterations < 1:
+        raise InputError(capture.root, f"iterations must be positive, not {iterations}",
+                         field="iterations")
+    t0 = time.perf_counter()
+    dev = resolve_device(device)
+    torch.manual_seed(cfg.seed)
+    held = holdout_indices(len(static), holdout)
+    train_idx = [i for i in range(len(static)) if i not in held]
+    splats, voxel = initial_splats([static[i] for i in train_idx], sh_degree=cfg.sh_degree,
+                                   voxel_pixels=cfg.voxel_pixels, scale=cfg.init_scale,
+                                   opacity=cfg.init_opacity)
+    train = [_view(i, static[i], dev) for i in train_idx]
+    size = float(np.linalg.norm(splats.means.max(0) - splats.means.min(0)))
+    cap = iterations or cfg.max_iterations
+
+    params = {"means": splats.means, "quats": splats.quats, "log_scales": splats.log_scales,
+              "opacity_logits": splats.opacity_logits, "sh0": splats.sh[:, :1],
+              "shN": splats.sh[:, 1:]}
+    lrs = {"means": cfg.lr_means * size, "quats": cfg.lr_quats, "log_scales": cfg.lr_scales,
+           "opacity_logits": cfg.lr_opacity, "sh0": cfg.lr_sh0, "shN": cfg.lr_shN}
+    opt = Adam({k: torch.as_tensor(v, device=dev) for k, v in params.items()}, lrs)
+    densifier = Densifier(len(splats), cfg.densify)
+    depth_unit = 0.01 * size
+    progress.log(f"reconstruct: {len(train)} training views, held out {held}, "
+                 f"{len(splats)} initial Gaussians (voxel {1000 * voxel:.1f} mm)")
+
+    rng = np.random.default_rng(cfg.seed)
+    order: list[int] = []
+    window: list[float] = []
+    prev_window = math.inf
+    it = 0
+    stopped = "cap"
+    for it in range(1, cap + 1):
+        if not order:
+            order = list(rng.permutation(len(train)))
+        v = train[order.pop()]
+        opt.lrs["means"] = lrs["means"] * 0.01 ** min(it / cap, 1.0)
+        p = opt.params
+        r = _render(p, v, backend)
+        l1 = (r.rgb - v.rgb).abs().mean()
+        loss = (1 - cfg.lambda_ssim) * l1 + cfg.lambda_ssim * (1 - ssim(r.rgb, v.rgb))
+        if v.depth_valid.any():
+            loss = loss + cfg.lambda_depth / depth_unit * \
+                (r.depth - v.depth)[v.depth_valid].abs().mean()
+        loss = loss + cfg.lambda_alpha * (r.alpha - v.mask).abs().mean()
+        opt.zero_grad()
+        loss.backward()
+        densify_now = it <= cfg.densify_until * cap
+        if densify_now:
+            densifier.accumulate(p["means"].detach(), p["means"].grad, v.w2c, v.K, v.width,
+                                 v.height)
+        opt.step()
+        if densify_now and it >= cfg.densify_from and it % cfg.densify_every == 0:
+            densifier.step(opt)
+
+        window.append(loss.item())
+        if it % 25 == 0 or it == cap:
+            with torch.no_grad():
+                mse = float(((r.rgb - v.rgb) ** 2)[v.mask.bool()].mean())
+                mae = float((r.depth - v.depth)[v.depth_valid].abs().mean()) * 1000
+            progress.update(STAGE, it / cap, f"iteration {it}/{cap}", loss=loss.item(),
+                            psnr=-10 * math.log10(max(mse, 1e-12)), depth_mm=mae,
+                            gaussians=int(opt.params["means"].shape[0]))
+        else:
+            progress.check_cancel()
+        if len(window) == cfg.plateau_window:
+            cur = float(np.mean(window))
+            window = []
+            if iterations is None and it > cfg.densify_until * cap \
+                    and prev_window - cur < cfg.plateau_tol * prev_window:
+                stopped = "converged"
+                break
+            prev_window = cur
+
+    final = {k: v.detach() for k, v in opt.params.items()}
+    result = SplatArrays(means=final["means"].cpu().numpy(), quats=final["quats"].cpu().numpy(),
+                         log_scales=final["log_scales"].cpu().numpy(),
+                         opacity_logits=final["opacity_logits"].cpu().numpy(),
+                         sh=torch.cat([final["sh0"], final["shN"]], 1).cpu().numpy())
+    train_seconds = time.perf_counter() - t0
+    figures: dict[str, Any] = {
+        "iterations": it, "stopped": stopped, "gaussians": len(result),
+        "initial_gaussians": len(splats), "train_seconds": round(train_seconds, 2),
+        "final_loss": float(np.mean(window)) if window else prev_window,
+        "holdout_views": [static[i].index for i in held],
+    }
+    if held:
+        ev = evaluate(final, [_view(i, static[i], dev) for i in held], backend)
+        figures.update(holdout_psnr=ev["psnr"], holdout_depth_mae_mm=ev["depth_mae_mm"])
+    write_ply(Path(out) / outdir.SPLAT, result)
+    figures["seconds"] = round(time.perf_counter() - t0, 2)
+    return figures
+
+
+def reconstruct_command(args, progress: Progress) -> int:
+    """``artgs reconstruct OUT [--capture C] [--iterations N] [--holdout K] [--device D]``."""
+    out = Path(args.out)
+    capture_path = outdir.capture_of(out, args.capture)
+    capture = load_capture(capture_path)
+    if args.holdout < 0 or args.holdout > len(capture.static) - 1:
+        raise InputError(capture_path, f"--holdout must be 0..{len(capture.static) - 1}, "
+                         f"not {args.holdout}", field="holdout")
+    outdir.update_report(out, capture=str(Path(capture_path).resolve()))
+    progress.start(STAGE, "optimising the static splat")
+    figures = reconstruct(capture, out, progress, iterations=args.iterations,
+                          holdout=args.holdout, device=args.device)
+    seconds = progress.finish(STAGE, **{k: v for k, v in figures.items()
+                                        if isinstance(v, (int, float, str))})
+    outdir.update_report(out, STAGE, **{**figures, "seconds": round(seconds, 2)})
+    progress.finished(splat=str(out / outdir.SPLAT))
+    return 0
