@@ -39,7 +39,6 @@ class Plane:
 
     point: np.ndarray
     normal: np.ndarray
-    inliers: int
     coverage: float  # fraction of the (shrunk) box pixels with valid depth
 
 
@@ -109,7 +108,7 @@ def fit_plane(camera: Camera, depth: np.ndarray, box: np.ndarray) -> Plane | Non
             return None
     if normal @ (camera.center - center) < 0:
         normal = -normal
-    return Plane(center, normal, int(keep.sum()), coverage)
+    return Plane(center, normal, coverage)
 
 
 def on_plane(camera: Camera, uv: np.ndarray, plane: Plane) -> np.ndarray:
