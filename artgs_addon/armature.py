@@ -342,9 +342,11 @@ def _bone_joint(M: np.ndarray, bone: bpy.types.Bone) -> Joint:
 
 def _same(a: Joint, b: Joint, size: float) -> bool:
     """Same joint up to the float32 precision of bones and properties."""
-    tol_pos = 1e-5 * max(1.0, size, float(np.abs(b.origin).max()))
+    reach = max(1.0, size, float(np.abs(b.origin).max()))  # float32 error grows with coordinates
+    tol_pos = 1e-5 * reach
+    tol_axis = 1e-5 * reach / (BONE_LENGTH * size)
     return (a.name == b.name and a.type == b.type and a.parent == b.parent and a.child == b.child
-            and float(np.linalg.norm(a.axis - b.axis)) < 1e-5
+            and float(np.linalg.norm(a.axis - b.axis)) <= tol_axis
             and float(np.linalg.norm(a.origin - b.origin)) <= tol_pos
             and all(abs(x - y) <= 1e-6 * max(1.0, abs(y)) for x, y in zip(a.limit, b.limit)))
 

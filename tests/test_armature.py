@@ -141,14 +141,25 @@ def _assert_joints_equal(got: list[Joint], want: list[Joint], tol: float = 1e-6)
 
 
 def test_register_unregister_leaves_nothing_behind(addon):
-    names = [c.__name__ for m in (bone_props, bone_operators, bone_panel) for c in m.CLASSES]
+    classes = [c for m in (bone_props, bone_operators, bone_panel) for c in m.CLASSES]
     _unregister()
     try:
-        for name in names:
-            assert not hasattr(bpy.types, name), name
+        assert not any(c.is_registered for c in classes)
+        assert not any(hasattr(bpy.types, c.__name__) for c in classes)
         assert "artgs_joint" not in bpy.types.Bone.bl_rna.properties
         assert "artgs_joint" not in bpy.types.EditBone.bl_rna.properties
-        assert not hasattr(bpy.ops.artgs, "add_joint") or "add_joint" not in dir(bpy.ops.artgs)
+        assert "add_joint" not in dir(bpy.ops.artgs)
+        # the whole add-on registers and removes them too
+        import artgs
+
+        artgs.register()
+        try:
+            assert "artgs_joint" in bpy.types.EditBone.bl_rna.properties
+            assert all(c.is_registered for c in classes)
+        finally:
+            artgs.unregister()
+        assert not any(c.is_registered for c in classes)
+        assert "artgs_joint" not in bpy.types.Bone.bl_rna.properties
     finally:
         _register()
     assert "artgs_joint" in bpy.types.Bone.bl_rna.properties
