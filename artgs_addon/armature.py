@@ -46,7 +46,7 @@ def is_joint_armature(obj: bpy.types.Object | None) -> bool:
 
 
 def find_armature(context: bpy.types.Context) -> bpy.types.Object | None:
-    """The joints armature to work on: the active one, the active preview's, else the scene's first."""
+    """The joints armature to work on: the active one, the active preview's, else the first."""
     obj = context.active_object
     if is_joint_armature(obj):
         return obj
@@ -67,8 +67,8 @@ def check_transform(obj: bpy.types.Object) -> None:
     if not det > 1e-12:
         scale = tuple(round(v, 4) for v in obj.matrix_world.to_scale())
         kind = "a negative (mirroring)" if det < 0 else "a zero"
-        raise ArtgsError(f"Armature '{obj.name}' has {kind} scale {scale}, so its joints would turn "
-                         f"the wrong way; apply the scale first: {_FIX_SCALE}")
+        raise ArtgsError(f"Armature '{obj.name}' has {kind} scale {scale}, so its joints would "
+                         f"turn the wrong way; apply the scale first: {_FIX_SCALE}")
 
 
 def build_armature(context: bpy.types.Context, articulation: Articulation,

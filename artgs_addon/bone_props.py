@@ -78,7 +78,7 @@ class ArtgsJointProps(bpy.types.PropertyGroup):
     confidence: FloatProperty(name="Confidence", subtype="FACTOR", get=_confidence,
                               description="Confidence of the proposal (read-only)")
     built: StringProperty(name="Built", options={"HIDDEN"},
-                          description="The joint as built or last saved (JSON), to tell edits apart")
+                          description="The joint as built or last saved (JSON), to tell edits")
 
 
 CLASSES = (ArtgsJointProps,)

@@ -17,8 +17,8 @@ from .joints import Joint
 def assign_parts(points: np.ndarray, joints: Sequence[Joint], margin: float = 0.05) -> np.ndarray:
     """Part label per point: 0 = base, ``i + 1`` = the part moved by ``joints[i]``.
 
-    A point belongs to a joint's part if it lies in the joint's ``extent`` box grown on every side by
-    ``margin`` times the box's largest half-size (splat points scatter a little around surfaces).
+    A point belongs to a joint's part if it lies in the joint's ``extent`` box grown on every side
+    by ``margin`` times the box's largest half-size (splat points scatter a little around surfaces).
     A point inside several boxes goes to the smallest box (a drawer inside a cabinet door's box
     goes to the drawer); equal volumes go to the nearest centre. Joints without ``extent`` get no
     points.
@@ -51,8 +51,8 @@ def _box(joint: Joint) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         axes = np.asarray(ext["axes"], float).reshape(3, 3)
         half = np.asarray(ext["half_size"], float).reshape(3)
     except (KeyError, TypeError, ValueError) as exc:
-        raise ArtgsError(f"joint '{joint.name}', field 'extent': needs 'center' (3 numbers), 'axes' "
-                         f"(3 unit vectors) and 'half_size' (3 numbers) ({exc})") from exc
+        raise ArtgsError(f"joint '{joint.name}', field 'extent': needs 'center' (3 numbers), "
+                         f"'axes' (3 unit vectors) and 'half_size' (3 numbers) ({exc})") from exc
     norms = np.linalg.norm(axes, axis=1)
     if not (np.all(np.isfinite(axes)) and np.all(np.isfinite(center)) and np.all(np.isfinite(half))
             and np.all(norms > 1e-9) and np.all(half >= 0)):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from pathlib import Path
+from typing import Callable
 
 import bpy
 from bpy.props import EnumProperty, StringProperty
@@ -20,6 +20,17 @@ _EDIT_MODES = ("OBJECT", "POSE", "EDIT_ARMATURE")
 def _active_bone_name(obj: bpy.types.Object) -> str | None:
     bones = obj.data.edit_bones if obj.mode == "EDIT" else obj.data.bones
     return bones.active.name if bones.active is not None else None
+
+
+def _run(op: bpy.types.Operator, action: Callable[[], str]) -> set[str]:
+    """Run ``action`` (it returns the message for the status bar); report errors, don't raise."""
+    try:
+        message = action()
+    except (ArtgsError, OSError) as exc:
+        op.report({"ERROR"}, str(exc))
+        return {"CANCELLED"}
+    op.report({"INFO"}, message)
+    return {"FINISHED"}
 
 
 def _object_size(context: bpy.types.Context) -> float:
@@ -44,17 +55,15 @@ class ARTGS_OT_add_joint(bpy.types.Operator):
         return context.scene is not None and context.mode in _EDIT_MODES
 
     def execute(self, context: bpy.types.Context) -> set[str]:
-        try:
+        def add() -> str:
             obj = find_armature(context)
             if obj is None:
                 obj = build_armature(context, Articulation([]), size=_object_size(context))
             name = add_joint(context, obj, context.scene.cursor.location, (0.0, 0.0, 1.0),
                              self.joint_type)
-        except ArtgsError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        self.report({"INFO"}, f"Added {self.joint_type} joint '{name}' to '{obj.name}'")
-        return {"FINISHED"}
+            return f"Added {self.joint_type} joint '{name}' to '{obj.name}'"
+
+        return _run(self, add)
 
 
 class ARTGS_OT_remove_joint(bpy.types.Operator):
@@ -77,13 +86,12 @@ class ARTGS_OT_remove_joint(bpy.types.Operator):
     def execute(self, context: bpy.types.Context) -> set[str]:
         obj = find_armature(context)
         name = _active_bone_name(obj)
-        try:
+
+        def remove() -> str:
             remove_joint(context, obj, name)
-        except ArtgsError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        self.report({"INFO"}, f"Removed joint '{name}'")
-        return {"FINISHED"}
+            return f"Removed joint '{name}'"
+
+        return _run(self, remove)
 
 
 class ARTGS_OT_select_joint(bpy.types.Operator):
@@ -126,22 +134,21 @@ class ARTGS_OT_save_joints(bpy.types.Operator):
             cls.poll_message_set("No joints armature in the scene")
             return False
         settings = getattr(context.scene, "artgs", None)
-        if settings is None or not settings.output_dir:
+        if settings is None or settings.output_path is None:
             cls.poll_message_set("Choose an output folder first")
             return False
         return True
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         obj = find_armature(context)
-        path = Path(bpy.path.abspath(context.scene.artgs.output_dir)) / PROPOSALS
-        try:
+        path = context.scene.artgs.output_path / PROPOSALS
+
+        def save() -> str:
             joints = save_joints(obj, path)
-        except (ArtgsError, OSError) as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        edited = sum(j.source == "user" for j in joints)
-        self.report({"INFO"}, f"Saved {len(joints)} joints ({edited} by the user) to {path}")
-        return {"FINISHED"}
+            edited = sum(j.source == "user" for j in joints)
+            return f"Saved {len(joints)} joints ({edited} by the user) to {path}"
+
+        return _run(self, save)
 
 
 CLASSES = (ARTGS_OT_add_joint, ARTGS_OT_remove_joint, ARTGS_OT_select_joint, ARTGS_OT_save_joints)
