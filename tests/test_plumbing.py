@@ -51,4 +51,4 @@ def test_cli_help_loads_no_torch_and_bad_input_exits_2(tmp_path):
                          capture_output=True, text=True)
     assert res.returncode == 2
     last = json.loads(res.stdout.strip().splitlines()[-1])
-    assert last["event"] == "error" and "missing" in last["message"]
+    assert last["event"] == "error" and str(tmp_path) in last["message"]
