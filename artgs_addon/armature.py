@@ -182,6 +182,7 @@ def save_joints(obj: bpy.types.Object, path: str | Path) -> list[Joint]:
     """Write the armature's joints to ``path`` atomically, keeping the file's other fields.
 
     The saved joints become the new reference: they read back unchanged until edited again.
+    Pose locks and constraints are refreshed too (bones added by hand, a rescaled armature).
     """
     joints = read_joints(obj)
     path = Path(path)
@@ -199,6 +200,8 @@ def save_joints(obj: bpy.types.Object, path: str | Path) -> list[Joint]:
         joint = by_name[bone.name]
         bone.artgs_joint.built = json.dumps(joint.to_dict())
         bone.artgs_joint.source = joint.source or "user"
+    for name in by_name:
+        refresh_bone(obj, name, obj.data.edit_bones[name].artgs_joint if obj.mode == "EDIT" else None)
     return joints
 
 

@@ -236,6 +236,27 @@ def test_posing_bones_moves_their_parts_like_the_joints(ctx):
     np.testing.assert_allclose(moved[labels != 2], pts[labels != 2], atol=1e-5)
 
 
+def test_nested_joint_moves_with_its_parent(ctx):
+    art = _articulation()
+    drawer = art.joints[1]
+    flap = Joint("flap", "revolute", [1, 0, 0], [-0.3, -0.31, 0.12], (0.0, 1.0),
+                 parent=drawer.child, extent=_box([-0.3, -0.305, 0.2], [0.15, 0.004, 0.06]))
+    art.joints.append(flap)
+    pts, labels = _points(Articulation([drawer, flap]), n=40)  # labels: 1 drawer, 2 flap
+    preview = _preview(ctx, pts)
+    obj = armature.build_armature(ctx, art, preview=preview)
+    assert obj.data.bones["flap"].parent.name == "drawer"
+    armature.set_joint_value(obj, "drawer", 0.2)
+    armature.set_joint_value(obj, "flap", 0.5)
+    moved = _evaluated_world(ctx, preview)
+    np.testing.assert_allclose(moved[labels == 2],
+                               _apply(drawer.transform(0.2) @ flap.transform(0.5), pts[labels == 2]),
+                               atol=1e-5)
+    np.testing.assert_allclose(moved[labels == 1], _apply(drawer.transform(0.2), pts[labels == 1]),
+                               atol=1e-5)
+    _assert_joints_equal(armature.read_joints(obj), art.joints)  # rest pose: as built
+
+
 def test_constraints_keep_bones_within_limits_and_on_their_axis(ctx):
     art = _articulation()
     pts, labels = _points(art)
@@ -399,3 +420,23 @@ def test_remove_joint_returns_its_points_to_the_base(ctx):
     armature.set_joint_value(obj, "drawer", 0.1)
     moved = _evaluated_world(ctx, preview)
     np.testing.assert_allclose(moved[labels != 2], pts[labels != 2], atol=1e-5)
+
+
+def test_bone_added_by_hand_is_saved_as_a_user_joint_with_locks(ctx, tmp_path):
+    ctx.scene.artgs.output_dir = str(tmp_path)
+    obj = armature.build_armature(ctx, _articulation())
+    ctx.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    eb = obj.data.edit_bones.new("lid")  # as Shift+A does: no joint settings yet
+    eb.head, eb.tail = (0.0, 0.0, 1.0), (0.3, 0.0, 1.0)
+    bpy.ops.object.mode_set(mode="POSE")
+    assert len(obj.pose.bones["lid"].constraints) == 0
+    assert bpy.ops.artgs.save_joints() == {"FINISHED"}
+    saved = {j.name: j for j in read_articulation(tmp_path / "proposals.json").joints}
+    lid = saved["lid"]
+    assert (lid.type, lid.source, lid.child) == ("revolute", "user", "lid_link")
+    np.testing.assert_allclose(lid.axis, (1, 0, 0), atol=1e-6)
+    np.testing.assert_allclose(lid.origin, (0, 0, 1), atol=1e-6)
+    assert saved["door"].to_dict() == _articulation().joints[0].to_dict()
+    pb = obj.pose.bones["lid"]
+    assert len(pb.constraints) == 2 and tuple(pb.lock_rotation) == (True, False, True)
