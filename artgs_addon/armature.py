@@ -31,6 +31,7 @@ from .bone_props import ArtgsJointProps
 
 SIZE_KEY = "artgs_size"    # on the armature data: object size in metres; marks ArtGS armatures
 META_KEY = "artgs_meta"    # on the armature data: the joints file's top-level fields (JSON)
+NAME_KEY = "artgs_name"    # on the armature data: the ``name`` it was built under
 BONE_LENGTH = 0.25         # bone length as a fraction of the object size
 COLOURS = {"revolute": "THEME04", "prismatic": "THEME03"}  # bone colour palettes: blue, green
 CONSTRAINT = "ArtGS Limit"
@@ -76,7 +77,8 @@ def build_armature(context: bpy.types.Context, articulation: Articulation,
                    name: str = "ArtGS Joints") -> bpy.types.Object:
     """Create, or rebuild in place, the armature ``name`` with one bone per joint (world frame).
 
-    A rebuilt armature keeps its object transform: bones are placed so the joints are right in the
+    The armature built earlier under ``name`` is rebuilt even if the user renamed it; it keeps
+    its object transform: bones are placed so the joints are right in the
     world. With ``preview`` (a mesh whose vertices are the object's points), each joint's points
     (``core.parts.assign_parts``) go to a vertex group named after its bone and an Armature
     modifier deforms them, so posing a bone moves its part; the preview is parented to the armature.
@@ -89,11 +91,12 @@ def build_armature(context: bpy.types.Context, articulation: Articulation,
                              f"too long for a Blender bone; rename it")
     if preview is not None and preview.type != "MESH":
         raise ArtgsError(f"preview '{preview.name}' must be a mesh object, not {preview.type}")
-    obj = bpy.data.objects.get(name)
-    if not is_joint_armature(obj):
+    obj = _built_under(name)
+    if obj is None:
         obj = bpy.data.objects.new(name, bpy.data.armatures.new(name))
         context.collection.objects.link(obj)
         obj.show_in_front = True
+        obj.data[NAME_KEY] = name
     context.view_layer.update()
     check_transform(obj)
     arm = obj.data
@@ -121,6 +124,12 @@ def build_armature(context: bpy.types.Context, articulation: Articulation,
     obj.select_set(True)
     context.view_layer.objects.active = obj
     return obj
+
+
+def _built_under(name: str) -> bpy.types.Object | None:
+    """The joints armature built under ``name`` (the one still called so first), if any."""
+    found = [o for o in bpy.data.objects if is_joint_armature(o) and o.data.get(NAME_KEY) == name]
+    return next((o for o in found if o.name == name), found[0] if found else None)
 
 
 def read_joints(obj: bpy.types.Object) -> list[Joint]:

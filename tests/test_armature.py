@@ -207,6 +207,12 @@ def test_rebuild_replaces_bones_groups_and_modifier_cleanly(ctx):
     assert [b.name for b in second.data.bones] == ["drawer"]
     assert [g.name for g in preview.vertex_groups] == ["drawer"]
     assert [m.type for m in preview.modifiers] == ["ARMATURE"]
+    first.name = "cabinet joints"  # renamed by the user: still the one rebuilt
+    bpy.data.objects.new("ArtGS Joints", None)  # and the name taken by something else
+    third = armature.build_armature(ctx, art, preview=preview)
+    assert third == first and [b.name for b in third.data.bones] == ["door", "drawer"]
+    assert [g.name for g in preview.vertex_groups] == ["door", "drawer"]
+    armature.build_armature(ctx, Articulation([art.joints[1]]), preview=preview)
     members = [v.index for v in preview.data.vertices if v.groups]
     np.testing.assert_array_equal(members, np.flatnonzero(labels == 2))
     assert len(second.pose.bones["drawer"].constraints) == 2
