@@ -11,43 +11,32 @@ import pytest
 bpy = pytest.importorskip("bpy")
 from mathutils import Matrix, Vector  # noqa: E402
 
-from artgs.artgs_addon import armature, bone_props, properties  # noqa: E402
+import artgs  # noqa: E402
+from artgs.artgs_addon import armature, bone_props  # noqa: E402
 from artgs.core.errors import ArtgsError  # noqa: E402
 from artgs.core.joints import Articulation, Joint, read_articulation, write_articulation  # noqa: E402
 from artgs.operators import bones as bone_operators  # noqa: E402
 from artgs.panels import bones as bone_panel  # noqa: E402
-from artgs.panels import pipeline  # noqa: E402
 
-# What this module registers, in order (the main panel must precede its Bones sub-panel).
-_MODULES = (properties, bone_props, bone_operators, pipeline, bone_panel)
 DEG = math.pi / 180
-
-
-def _register() -> None:
-    for module in _MODULES:
-        for cls in module.CLASSES:
-            bpy.utils.register_class(cls)
-        if hasattr(module, "register_properties"):
-            module.register_properties()
-
-
-def _unregister() -> None:
-    for module in reversed(_MODULES):
-        if hasattr(module, "unregister_properties"):
-            module.unregister_properties()
-        for cls in reversed(module.CLASSES):
-            bpy.utils.unregister_class(cls)
+_BONE_CLASSES = [c for m in (bone_props, bone_operators, bone_panel) for c in m.CLASSES]
 
 
 @pytest.fixture(scope="module")
 def addon():
-    # bpy 4.5 as a module hangs at process exit while property groups with Python callbacks are
-    # registered, so this always unregisters.
-    _register()
+    """The whole add-on registered (unless something else registered it already).
+
+    bpy 4.5 as a module hangs at process exit while property groups with Python callbacks are
+    registered, so whatever this registers it always unregisters.
+    """
+    mine = not bone_props.ArtgsJointProps.is_registered
+    if mine:
+        artgs.register()
     try:
         yield
     finally:
-        _unregister()
+        if mine:
+            artgs.unregister()
 
 
 @pytest.fixture
@@ -141,29 +130,19 @@ def _assert_joints_equal(got: list[Joint], want: list[Joint], tol: float = 1e-6)
 
 
 def test_register_unregister_leaves_nothing_behind(addon):
-    classes = [c for m in (bone_props, bone_operators, bone_panel) for c in m.CLASSES]
-    _unregister()
+    artgs.unregister()
     try:
-        assert not any(c.is_registered for c in classes)
-        assert not any(hasattr(bpy.types, c.__name__) for c in classes)
+        assert not any(c.is_registered for c in _BONE_CLASSES)
+        assert not any(hasattr(bpy.types, c.__name__) for c in _BONE_CLASSES)
         assert "artgs_joint" not in bpy.types.Bone.bl_rna.properties
         assert "artgs_joint" not in bpy.types.EditBone.bl_rna.properties
         assert "add_joint" not in dir(bpy.ops.artgs)
-        # the whole add-on registers and removes them too
-        import artgs
-
-        artgs.register()
-        try:
-            assert "artgs_joint" in bpy.types.EditBone.bl_rna.properties
-            assert all(c.is_registered for c in classes)
-        finally:
-            artgs.unregister()
-        assert not any(c.is_registered for c in classes)
-        assert "artgs_joint" not in bpy.types.Bone.bl_rna.properties
     finally:
-        _register()
+        artgs.register()
+    assert all(c.is_registered for c in _BONE_CLASSES)
     assert "artgs_joint" in bpy.types.Bone.bl_rna.properties
-    assert hasattr(bpy.types, "ARTGS_PT_bones") and "add_joint" in dir(bpy.ops.artgs)
+    assert "artgs_joint" in bpy.types.EditBone.bl_rna.properties
+    assert "add_joint" in dir(bpy.ops.artgs)
 
 
 def test_armature_built_from_proposals_file_matches_it(ctx, tmp_path):
