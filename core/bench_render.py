@@ -47,13 +47,13 @@ def shell_scene(n: int, size: int, seed: int = 0):
 @njit(cache=True)
 def _count_pairs(feats, offsets, ids, width, height):
     """Gaussian-pixel pairs blended by the forward kernel (same rules)."""
-    tile = rk.TILE
-    tiles_x = (width + tile - 1) // tile
+    tw, th = rk.TILE_W, rk.TILE_H
+    tiles_x = (width + tw - 1) // tw
     total = 0
     for t in range(len(offsets) - 1):
         ty, tx = t // tiles_x, t % tiles_x
-        for i in range(ty * tile, min(ty * tile + tile, height)):
-            for j in range(tx * tile, min(tx * tile + tile, width)):
+        for i in range(ty * th, min(ty * th + th, height)):
+            for j in range(tx * tw, min(tx * tw + tw, width)):
                 T = np.float32(1.0)
                 for k in range(offsets[t], offsets[t + 1]):
                     g = ids[k]

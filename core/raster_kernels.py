@@ -5,7 +5,7 @@ Inputs are float32 arrays of the visible Gaussians already in front-to-back orde
 Binning keeps that order inside every tile list (count, prefix sum, fill), so no per-tile sort.
 The model is the one of core/raster_reference.py (its docstring lists the rules).
 
-The blend loops run Gaussian-outer, pixel-inner over the 64 pixels of an 8x8 tile, branch-free
+The blend loops run Gaussian-outer, pixel-inner over the pixels of a tile, branch-free
 (selects instead of branches, a polynomial exp), so LLVM vectorises them. A pixel that reaches
 the transmittance limit stores its transmittance negated (= done). The backward pass walks each
 tile's list back to front from the last contributor of any of its pixels and recovers every
@@ -20,8 +20,8 @@ import numpy as np
 from numba import njit, prange
 
 NF = 10  # floats per Gaussian in ``feats`` and its gradient
-TILE = 8
-NPIX = TILE * TILE
+TILE_W, TILE_H = 4, 4  # pixels per tile; the blend loops vectorise over its TILE_W * TILE_H pixels
+NPIX = TILE_W * TILE_H
 f32 = np.float32
 POWER_CUTOFF = f32(4.5)
 ALPHA_MIN = f32(1.0 / 255.0)
@@ -68,8 +68,8 @@ def depth_order(depths, candidates):
 @njit(cache=True)
 def bin_tiles(feats, extent, width, height):
     """Tile lists: ``offsets`` (tiles+1) and Gaussian ids (depth order kept inside each tile)."""
-    tiles_x = (width + TILE - 1) // TILE
-    tiles_y = (height + TILE - 1) // TILE
+    tiles_x = (width + TILE_W - 1) // TILE_W
+    tiles_y = (height + TILE_H - 1) // TILE_H
     m = feats.shape[0]
     rect = np.empty((m, 4), np.int32)
     counts = np.zeros(tiles_x * tiles_y + 1, np.int64)
@@ -83,8 +83,8 @@ def bin_tiles(feats, extent, width, height):
         if j0 > j1 or i0 > i1:
             rect[g, 0], rect[g, 1] = 1, 0
             continue
-        rect[g, 0], rect[g, 1] = j0 // TILE, j1 // TILE
-        rect[g, 2], rect[g, 3] = i0 // TILE, i1 // TILE
+        rect[g, 0], rect[g, 1] = j0 // TILE_W, j1 // TILE_W
+        rect[g, 2], rect[g, 3] = i0 // TILE_H, i1 // TILE_H
         for ty in range(rect[g, 2], rect[g, 3] + 1):
             for tx in range(rect[g, 0], rect[g, 1] + 1):
                 counts[ty * tiles_x + tx + 1] += 1
@@ -106,10 +106,10 @@ def bin_tiles(feats, extent, width, height):
 def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n):
     """Front-to-back blend: colour sum (H,W,3), depth sum, alpha, and per pixel the number of
     tile-list entries up to its last contributor."""
-    tiles_x = (width + TILE - 1) // TILE
-    tiles_y = (height + TILE - 1) // TILE
+    tiles_x = (width + TILE_W - 1) // TILE_W
+    tiles_y = (height + TILE_H - 1) // TILE_H
     for t in prange(tiles_x * tiles_y):
-        i0, j0 = (t // tiles_x) * TILE, (t % tiles_x) * TILE
+        i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
         px = np.empty(NPIX, np.float32)
         py = np.empty(NPIX, np.float32)
         T = np.empty(NPIX, np.float32)
@@ -117,7 +117,7 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
         last = np.zeros(NPIX, np.int32)
         done = 0
         for p in range(NPIX):
-            i, j = i0 + p // TILE, j0 + p % TILE
+            i, j = i0 + p // TILE_W, j0 + p % TILE_W
             px[p], py[p] = f32(j + 0.5), f32(i + 0.5)
             inside = i < height and j < width
             T[p] = _ONE if inside else -_ONE
@@ -151,7 +151,7 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
                 stops += 1 if stop else 0
             done += stops
         for p in range(NPIX):
-            i, j = i0 + p // TILE, j0 + p % TILE
+            i, j = i0 + p // TILE_W, j0 + p % TILE_W
             if i < height and j < width:
                 out_c[i, j, 0], out_c[i, j, 1], out_c[i, j, 2] = acc[0, p], acc[1, p], acc[2, p]
                 out_d[i, j] = acc[3, p]
@@ -162,35 +162,34 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
 @njit(parallel=True, fastmath=True, cache=True)
 def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g_a, grads):
     """Gradients w.r.t. ``feats`` summed into per-thread buffers ``grads`` (threads, M, 10)."""
-    tiles_x = (width + TILE - 1) // TILE
-    tiles_y = (height + TILE - 1) // TILE
+    tiles_x = (width + TILE_W - 1) // TILE_W
+    tiles_y = (height + TILE_H - 1) // TILE_H
     for t in prange(tiles_x * tiles_y):
         buf = grads[numba.get_thread_id()]
-        i0, j0 = (t // tiles_x) * TILE, (t % tiles_x) * TILE
+        i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
         px = np.empty(NPIX, np.float32)
         py = np.empty(NPIX, np.float32)
         T = np.ones(NPIX, np.float32)
-        T_final = np.ones(NPIX, np.float32)
-        gpix = np.zeros((5, NPIX), np.float32)   # dL/d colour sum (3), depth sum, alpha
+        # per pixel: dL/d colour sum (3), dL/d depth sum, dL/d alpha * final transmittance
+        gpix = np.zeros((5, NPIX), np.float32)
         rest = np.zeros((4, NPIX), np.float32)   # colour/depth of what lies behind, normalised
         last = np.zeros(NPIX, np.int32)
         start = offsets[t]
         k_end = 0
         for p in range(NPIX):
-            i, j = i0 + p // TILE, j0 + p % TILE
+            i, j = i0 + p // TILE_W, j0 + p % TILE_W
             px[p], py[p] = f32(j + 0.5), f32(i + 0.5)
             if i < height and j < width:
                 T[p] = _ONE - out_a[i, j]
-                T_final[p] = T[p]
                 gpix[0, p], gpix[1, p], gpix[2, p] = g_c[i, j, 0], g_c[i, j, 1], g_c[i, j, 2]
-                gpix[3, p], gpix[4, p] = g_d[i, j], g_a[i, j]
+                gpix[3, p], gpix[4, p] = g_d[i, j], g_a[i, j] * T[p]
                 last[p] = out_n[i, j]
                 k_end = max(k_end, out_n[i, j])
         for kk in range(k_end - 1, -1, -1):
             g = ids[start + kk]
             mx, my, ca, cb, cc = feats[g, 0], feats[g, 1], feats[g, 2], feats[g, 3], feats[g, 4]
             op, cr, cg, cbl, dep = feats[g, 5], feats[g, 6], feats[g, 7], feats[g, 8], feats[g, 9]
-            s_mx = s_my = s_ca = s_cb = s_cc = s_op = s_r = s_g = s_b = s_d = _ZERO
+            s_r = s_g = s_b = s_d = s_h = s_x = s_y = s_xx = s_xy = s_yy = _ZERO
             for p in range(NPIX):
                 dx = px[p] - mx
                 dy = py[p] - my
@@ -199,8 +198,7 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
                 raw = op * gauss
                 alpha = min(ALPHA_MAX, raw)
                 valid = (kk < last[p]) & (power <= POWER_CUTOFF) & (alpha >= ALPHA_MIN)
-                one_minus = _ONE - alpha
-                inv = _ONE / one_minus
+                inv = _ONE / (_ONE - alpha)
                 Tb = T[p] * inv
                 w = alpha * Tb if valid else _ZERO
                 gr, gg, gb, gd = gpix[0, p], gpix[1, p], gpix[2, p], gpix[3, p]
@@ -208,40 +206,29 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
                 s_g += w * gg
                 s_b += w * gb
                 s_d += w * gd
-                g_alpha = Tb * (gr * (cr - rest[0, p]) + gg * (cg - rest[1, p])
-                                + gb * (cbl - rest[2, p]) + gd * (dep - rest[3, p])) \
-                    + gpix[4, p] * T_final[p] * inv
-                g_alpha = g_alpha if valid & (raw <= ALPHA_MAX) else _ZERO
-                s_op += gauss * g_alpha
-                g_power = -raw * g_alpha
-                s_ca += dx * dx * g_power
-                s_cb += dx * dy * g_power
-                s_cc += dy * dy * g_power
-                s_mx -= (ca * dx + cb * dy) * g_power
-                s_my -= (cb * dx + cc * dy) * g_power
+                d_r, d_g, d_b, d_d = cr - rest[0, p], cg - rest[1, p], cbl - rest[2, p], dep - rest[3, p]
+                g_alpha = Tb * (gr * d_r + gg * d_g + gb * d_b + gd * d_d) + gpix[4, p] * inv
+                # h = d alpha/d power * dL/d alpha / (-opacity); zero where alpha is clamped
+                h = gauss * g_alpha if valid & (raw <= ALPHA_MAX) else _ZERO
+                s_h += h
+                s_x += dx * h
+                s_y += dy * h
+                s_xx += dx * dx * h
+                s_xy += dx * dy * h
+                s_yy += dy * dy * h
+                a_v = alpha if valid else _ZERO
                 T[p] = Tb if valid else T[p]
-                rest[0, p] = alpha * cr + one_minus * rest[0, p] if valid else rest[0, p]
-                rest[1, p] = alpha * cg + one_minus * rest[1, p] if valid else rest[1, p]
-                rest[2, p] = alpha * cbl + one_minus * rest[2, p] if valid else rest[2, p]
-                rest[3, p] = alpha * dep + one_minus * rest[3, p] if valid else rest[3, p]
-            buf[g, 0] += s_mx
-            buf[g, 1] += s_my
-            buf[g, 2] += _HALF * s_ca
-            buf[g, 3] += s_cb
-            buf[g, 4] += _HALF * s_cc
-            buf[g, 5] += s_op
+                rest[0, p] += a_v * d_r
+                rest[1, p] += a_v * d_g
+                rest[2, p] += a_v * d_b
+                rest[3, p] += a_v * d_d
+            buf[g, 0] += op * (ca * s_x + cb * s_y)
+            buf[g, 1] += op * (cb * s_x + cc * s_y)
+            buf[g, 2] -= _HALF * op * s_xx
+            buf[g, 3] -= op * s_xy
+            buf[g, 4] -= _HALF * op * s_yy
+            buf[g, 5] += s_h
             buf[g, 6] += s_r
             buf[g, 7] += s_g
             buf[g, 8] += s_b
             buf[g, 9] += s_d
-
-
-@njit(parallel=True, cache=True)
-def sum_threads(grads, out):
-    """out = grads.sum(axis=0), parallel over Gaussians."""
-    for g in prange(grads.shape[1]):
-        for f in range(grads.shape[2]):
-            s = _ZERO
-            for t in range(grads.shape[0]):
-                s += grads[t, g, f]
-            out[g, f] = s
