@@ -35,7 +35,8 @@ from .cameras import Camera
 from .capture import Capture, Frame
 from .joints import Joint, joint_transform, rotation_about_axis
 from .progress import QUIET, Progress
-from .rigid import StepData, apply, tukey_weights, fit_joint, icp, make_transform, refine_joint
+from .rigid import (StepData, apply, fit_joint, icp, make_transform, refine_joint, rotation_log,
+                    tukey_weights)
 
 
 @dataclass
@@ -52,7 +53,11 @@ class MotionConfig:
     min_angle_deg: float = 8.0        # revolute when the part turns at least this much ...
     min_rms_ratio: float = 3.0        # ... and a slide fits that much worse (core.rigid.fit_joint)
     icp_iterations: int = 30
-    refine_rounds: int = 1            # joint refinements on the measurements (part re-gathered)
+    icp_candidates: int = 5           # best-scoring pose hypotheses refined by ICP per step
+    jump_penalty: float = 0.5         # score cost of a pose far from the constant-velocity guess
+    grow_score: float = 0.3           # steps tracked at least this well add points to the part
+    grow_depth: float = 0.1           # ... from at most this far behind its closed front (m)
+    refine_rounds: int = 4            # rounds of joint refinement on the measurements
     snap_deg: float = 25.0            # a slide this close to the front's normal is taken along it
 
 
@@ -254,21 +259,50 @@ def _grid_points(v: View, d: np.ndarray, step: int = 2) -> tuple[np.ndarray, np.
 
 # --- tracking ---------------------------------------------------------------------------------
 
-def projective_score(points: np.ndarray, views: list[View], t: int) -> tuple[float, np.ndarray]:
-    """Agreement of part points placed at step ``t`` with the depth maps: matched minus
-    contradicting (in front of a measured surface, or over a pixel showing no object) per point;
-    also the per-point "not hidden" flags (visible in some view)."""
-    matched = np.zeros(len(points), bool)
+def projective_score(points: np.ndarray, views: list[View], t: int) -> float:
+    """Agreement of part points placed at step ``t`` with the depth maps, per point (-1..1).
+
+    A point on a measured surface scores up to 1 (less as it nears the threshold); one in front of
+    a measured surface, or over a pixel showing no object, scores -1 (it would have been seen);
+    a hidden point (behind the surface) or one outside every view scores 0. The best view counts.
+    """
+    best = np.zeros(len(points))
     wrong = np.zeros(len(points), bool)
     for v in views:
         if t not in v.depth:
             continue
         inside, z, lo, hi = _lookup(v, t, points)
         has = inside & (lo > 0)
-        matched |= has & (z > lo - v.threshold) & (z < hi + v.threshold)
+        off = np.maximum(np.maximum(lo - z, z - hi), 0.0) / v.threshold
+        best = np.maximum(best, np.where(has & (off < 1), 1.0 - off * off, 0.0))
         wrong |= (has & (z < lo - v.threshold)) | (inside & (lo <= 0) & (v.mask[t] is not None))
-    wrong &= ~matched
-    return float(matched.sum() - wrong.sum()) / max(len(points), 1), matched | wrong
+    return float(np.where(best > 0, best, -wrong.astype(float)).sum()) / max(len(points), 1)
+
+
+def polish(T: np.ndarray, points: np.ndarray, views: list[View], t: int, step: float,
+           min_step: float) -> tuple[np.ndarray, float]:
+    """Pattern search of the pose ``T`` maximising :func:`projective_score` (translations of
+    ``step`` metres and turns of the matching angle about the part's centre, halved down to
+    ``min_step``). Silhouettes pin what flat faces leave free in point-to-plane ICP."""
+    c = apply(T, points).mean(axis=0)
+    size = max(float(np.linalg.norm(points - points.mean(axis=0), axis=1).max()), 1e-3)
+    best = projective_score(apply(T, points), views, t)
+    while step >= min_step:
+        improved = False
+        for k in range(6):
+            for sign in (-1.0, 1.0):
+                if k < 3:
+                    D = make_transform(np.eye(3), sign * step * np.eye(3)[k])
+                else:
+                    R = rotation_about_axis(np.eye(3)[k - 3], sign * step / size)
+                    D = make_transform(R, c - R @ c)
+                cand = D @ T
+                s = projective_score(apply(cand, points), views, t)
+                if s > best + 1e-6:
+                    best, T, improved = s, cand, True
+        if not improved:
+            step /= 2
+    return T, best
 
 
 def _visible(views: list[View], t: int):
@@ -321,11 +355,30 @@ class Track:
     rms: dict[int, float]
 
 
+def _jump(T: np.ndarray, predicted: np.ndarray, points: np.ndarray) -> float:
+    """How far pose ``T`` departs from the constant-velocity prediction beyond what a step's
+    change of speed explains (0 within 25 degrees and 10 cm of it)."""
+    D = T @ np.linalg.inv(predicted)
+    angle = math.degrees(rotation_log(D[:3, :3])[1])
+    shift = float(np.linalg.norm(apply(T, points).mean(axis=0) - apply(predicted, points).mean(axis=0)))
+    return max(0.0, (angle - 25.0) / 20.0) + max(0.0, (shift - 0.1) / 0.1)
+
+
 def track_part(points: np.ndarray, views: list[View], times: list[int], start: int,
-               clouds: dict[int, tuple[np.ndarray, np.ndarray, cKDTree]], config: MotionConfig
-               ) -> Track:
-    """Poses of a part (closed-state ``points``) at every step; identity before ``start``."""
+               clouds: dict[int, tuple[np.ndarray, np.ndarray, cKDTree, np.ndarray]],
+               config: MotionConfig) -> Track:
+    """Poses of a part (closed-state ``points``) at every step; identity before ``start``.
+
+    The part's model grows as it moves: measured points that moved in with it (e.g. a door's inner
+    face, a drawer's sides) are mapped back to the closed state and tracked from then on, so the
+    part stays trackable when the face seen in the static views turns away.
+    """
     thr = float(np.median([v.threshold for v in views]))
+    model = points
+    centre, axes, half = box_of(points)
+    cams = np.mean([v.camera.center for v in views], axis=0)
+    front = axes[0] if axes[0] @ (cams - centre) >= 0 else -axes[0]
+    rng = np.random.default_rng(1)
     Ts: dict[int, np.ndarray] = {}
     score: dict[int, float] = {}
     rms: dict[int, float] = {}
@@ -337,23 +390,46 @@ def track_part(points: np.ndarray, views: list[View], times: list[int], start: i
             continue
         base = prev[-1] if prev else np.eye(4)
         hyps = [base]
-        if len(prev) >= 2:
-            hyps.append(base @ np.linalg.inv(prev[-2]) @ base)
+        predicted = None
+        if len(prev) >= 2 and t > start:
+            predicted = base @ np.linalg.inv(prev[-2]) @ base
+            hyps.append(predicted)
         hyps += prev[:-1]   # the part may go back through earlier poses (closing)
         hyps += [H @ base for H in first_move_hypotheses(apply(base, points))]
-        scored = sorted(hyps, key=lambda H: -projective_score(apply(H, points), views, t)[0])
-        P, N, tree = clouds[t]
+        scored = sorted(hyps, key=lambda H: -projective_score(apply(H, model), views, t))
+        P, N, tree, moved = clouds[t]
         best = None
-        for H in scored[:5]:
-            res = icp(points, P, N, H, tree=tree, max_distance=max(0.05, 4 * thr),
+        for H in scored[:config.icp_candidates]:
+            res = icp(model, P, N, H, tree=tree, max_distance=max(0.05, 4 * thr),
                       min_distance=thr / 2, iterations=config.icp_iterations,
                       keep=_visible(views, t))
-            s, _ = projective_score(apply(res.T, points), views, t)
+            s = projective_score(apply(res.T, model), views, t)
+            if predicted is not None:
+                s -= config.jump_penalty * _jump(res.T, predicted, model)
             if best is None or s > best[0]:
                 best = (s, res)
-        s, res = best
-        Ts[t], score[t], rms[t] = res.T, s, res.rms
-        prev.append(res.T)
+        _, res = best
+        T, s = polish(res.T, model, views, t, 2 * thr, thr / 4)
+        Ts[t], score[t], rms[t] = T, s, res.rms
+        prev.append(T)
+        if s > config.grow_score and moved.any():
+            back = apply(np.linalg.inv(T), P[moved])
+            rel = back - centre
+            local = rel @ axes.T
+            depth = rel @ front
+            inside = (np.all(np.abs(local[:, 1:]) <= half[1:] + 0.02, axis=1)
+                      & (depth <= half[0] + 0.02) & (depth >= -half[0] - config.grow_depth))
+            new = back[inside]
+            if len(new):
+                new = new[cKDTree(model).query(new)[0] > thr]
+                if len(new) > config.track_points // 2:
+                    new = new[rng.choice(len(new), config.track_points // 2, replace=False)]
+                model = np.concatenate([model, new])
+                if len(model) > 2 * config.track_points:
+                    keep = np.concatenate([np.arange(len(points)), len(points) + rng.choice(
+                        len(model) - len(points), 2 * config.track_points - len(points),
+                        replace=False)])
+                    model = model[keep]
     return Track(Ts, score, rms)
 
 
@@ -391,18 +467,16 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
         S = pts[idx]
         St = S[rng.choice(len(S), cfg.track_points, replace=False)] if len(S) > cfg.track_points else S
         start = int(np.min(first[idx]))
-        track = track_part(St, views, times, start, {t: c[:3] for t, c in clouds.items()}, cfg)
+        track = track_part(St, views, times, start, clouds, cfg)
         moving = [t for t in times if t >= start]
         weights = np.array([max(track.score[t], 0.05) for t in moving])
         fit = fit_joint(St, [track.transforms[t] for t in moving], cfg.min_angle_deg, weights,
                         cfg.min_rms_ratio)
         steps = [StepData(*clouds[t][:3], _visible(views, t)) for t in moving]
         thr = float(np.median([v.threshold for v in views]))
-        for _ in range(cfg.refine_rounds):
-            X = _part_points(S, fit, _fit_transforms(fit, moving), clouds)
-            X = X[rng.choice(len(X), 2 * cfg.track_points, replace=False)] \
-                if len(X) > 2 * cfg.track_points else X
-            fit = refine_joint(fit, X, steps, min_distance=thr / 2, max_distance=max(0.05, 4 * thr))
+        # the splat's own points of the part: unbiased by tracking (a turning face pins the hinge)
+        fit = refine_joint(fit, St, steps, rounds=cfg.refine_rounds, min_distance=thr / 2,
+                           max_distance=max(0.05, 4 * thr))
         snapped = None
         if fit.type == "prismatic":
             fit, snapped = _snap_to_front(fit, S, cfg.snap_deg)

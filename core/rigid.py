@@ -354,8 +354,11 @@ def refine_joint(fit: JointFit, points: np.ndarray, steps: list[StepData], *, ro
         rms = math.sqrt(sq / max(wsum, 1e-12))
         pw = math.sqrt(point_weight)
 
+        x_start = x.copy()
+
         def resid(x: np.ndarray) -> np.ndarray:
-            out = []
+            # a weak pull to the start keeps values of steps without matches in place
+            out = [1e-3 * (x - x_start)]
             for k, X, q, n, sw in matches:
                 diff = place(x, k, X) - q
                 out.append(sw * np.einsum("ij,ij->i", diff, n))
