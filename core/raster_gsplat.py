@@ -13,13 +13,16 @@ from .sh import sh_degree
 
 def rasterize_gsplat(means, quats, log_scales, opacity_logits, sh, K, w2c, width, height,
                      background, near):
-    """-> rgb (H,W,3) over ``background``, expected depth (H,W), alpha (H,W)."""
+    """-> rgb (H,W,3) over ``background``, expected depth (H,W), alpha (H,W) (float32 inside,
+    returned in the dtype of ``means``)."""
     from gsplat import rasterization
 
+    f = torch.float32
     colors, alphas, _ = rasterization(
-        means, quats, torch.exp(log_scales), torch.sigmoid(opacity_logits), sh,
-        w2c[None], K[None], int(width), int(height), near_plane=near,
-        sh_degree=sh_degree(sh.shape[1]), render_mode="RGB+ED")
-    alpha = alphas[0, ..., 0]
-    rgb = colors[0, ..., :3] + (1.0 - alpha)[..., None] * background
-    return rgb, colors[0, ..., 3], alpha
+        means.to(f), quats.to(f), torch.exp(log_scales).to(f),
+        torch.sigmoid(opacity_logits).to(f), sh.to(f), w2c.to(f)[None], K.to(f)[None],
+        int(width), int(height), near_plane=near, sh_degree=sh_degree(sh.shape[1]),
+        render_mode="RGB+ED")
+    alpha = alphas[0, ..., 0].to(means.dtype)
+    rgb = colors[0, ..., :3].to(means.dtype) + (1.0 - alpha)[..., None] * background
+    return rgb, colors[0, ..., 3].to(means.dtype), alpha

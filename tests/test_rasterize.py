@@ -15,7 +15,7 @@ from artgs.core.errors import ArtgsError
 from artgs.core.gaussians import Gaussians
 from artgs.core.raster_project import quat_to_rotmat
 from artgs.core.rasterize import rasterize, render
-from artgs.core.sh import C0
+from artgs.core.sh import C0, sh_basis
 
 W, H = 32, 24
 K = intrinsics(30.0, 32.0, 15.5, 12.5)
@@ -207,6 +207,32 @@ def test_no_gaussians_gives_background(backend):
     out = rasterize(*empty, K, np.eye(4), W, H, BG, backend=backend)
     assert torch.equal(out.rgb, torch.tensor(BG, dtype=DT).expand(H, W, 3))
     assert (out.alpha == 0).all() and (out.depth == 0).all()
+
+
+def test_odd_image_size():
+    """Image sizes that are not a multiple of the tile size (partial tiles on both edges)."""
+    k = intrinsics(20.0, 21.0, 13.0, 9.5)
+    params = random_scene(21, n=40, degree=1)
+    result = render_both(params, width=27, height=19, k=k)
+    assert result["cpu"][0].rgb.shape == (19, 27, 3)
+    assert_match(result)
+
+
+def test_sh_basis_is_orthonormal():
+    """Real SH up to degree 3 on a fine Fibonacci sphere: integral of Y_i Y_j = delta_ij."""
+    n = 40000
+    i = torch.arange(n, dtype=DT) + 0.5
+    z = 1 - 2 * i / n
+    phi = math.pi * (3 - math.sqrt(5)) * i
+    r = torch.sqrt(1 - z * z)
+    dirs = torch.stack([r * torch.cos(phi), r * torch.sin(phi), z], 1)
+    Y = sh_basis(3, dirs)
+    gram = Y.T @ Y * (4 * math.pi / n)
+    assert torch.allclose(gram, torch.eye(16, dtype=DT), atol=2e-3)
+    assert torch.allclose(Y[:, 0], torch.full((n,), C0, dtype=DT))
+    # the degree-1 band is (-y, z, -x) times sqrt(3 / 4 pi), as in 3DGS
+    c1 = math.sqrt(3 / (4 * math.pi))
+    assert torch.allclose(Y[:, 1:4], c1 * torch.stack([-dirs[:, 1], dirs[:, 2], -dirs[:, 0]], 1))
 
 
 def test_one_pixel_image():
