@@ -45,6 +45,21 @@ def exp_neg(x):
 
 
 @njit(cache=True)
+def spread_stride(n):
+    """A stride coprime with n near 0.618 n: iteration i -> tile (i * stride) % n visits every
+    tile once and spreads any contiguous run of iterations over the whole image, so prange's
+    contiguous per-thread split stays balanced when the content is in one part of the image."""
+    stride = max(1, int(n * 0.6180339887))
+    while True:
+        a, b = stride, n
+        while b:
+            a, b = b, a % b
+        if a == 1:
+            return stride
+        stride += 1
+
+
+@njit(cache=True)
 def depth_order(depths, candidates):
     """``candidates`` sorted by ``depths`` (all > 0), stable: LSD radix sort on the float bits."""
     keys = depths.view(np.uint32)
@@ -108,7 +123,10 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
     tile-list entries up to its last contributor."""
     tiles_x = (width + TILE_W - 1) // TILE_W
     tiles_y = (height + TILE_H - 1) // TILE_H
-    for t in prange(tiles_x * tiles_y):
+    n_tiles = tiles_x * tiles_y
+    stride = spread_stride(n_tiles)
+    for it in prange(n_tiles):
+        t = (it * stride) % n_tiles
         i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
         px = np.empty(NPIX, np.float32)
         py = np.empty(NPIX, np.float32)
@@ -164,7 +182,10 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
     """Gradients w.r.t. ``feats`` summed into per-thread buffers ``grads`` (threads, M, 10)."""
     tiles_x = (width + TILE_W - 1) // TILE_W
     tiles_y = (height + TILE_H - 1) // TILE_H
-    for t in prange(tiles_x * tiles_y):
+    n_tiles = tiles_x * tiles_y
+    stride = spread_stride(n_tiles)
+    for it in prange(n_tiles):
+        t = (it * stride) % n_tiles
         buf = grads[numba.get_thread_id()]
         i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
         px = np.empty(NPIX, np.float32)
