@@ -3,21 +3,27 @@
 Steps (all in the world frame, metres):
 
 1. Interaction frames are grouped into fixed cameras (same pose and intrinsics). Each camera's
-   closed-state depth is its earliest frame when that frame is time 0 of the capture, else the
-   static splat rendered from it.
-2. Depth noise per camera comes from the median absolute difference between each step and the
-   closed state (most pixels do not move); the change threshold is a multiple of it.
+   closed-state depth is its frame at time 0 when it has one, else the static splat rendered
+   from it.
+2. Depth noise per camera comes from second differences of its depth maps on smooth surfaces; the
+   change threshold is a multiple of it (for a rendered closed state, of the render's error).
 3. A static splat point that the closed-state view sees and that a later step sees *through*
    (measured depth farther than the point by more than the threshold, or no object there) belongs
    to a moving part: rigid scenes cannot reveal what was behind a surface. Such points are grouped
    into parts by 3D connectivity and the step at which they first vanish.
-4. Each part is tracked through the steps: hypotheses (previous pose, constant velocity, earlier
-   poses, and turns about the part's box edges and slides along its normal) are scored
-   by projecting the part into the step's depth maps, the best ones refined by robust
-   point-to-plane ICP against the step's measured points.
-5. One revolute and one prismatic joint are fitted to all of the part's motions jointly
-   (core.rigid.fit_joint); the part is revolute if it turns. Joint values per step are ``states``,
-   the observed range is ``limit``. Extent, handle and confidence follow from the part's points.
+4. Each part is tracked through the steps. Pose hypotheses (previous pose, constant velocity,
+   earlier poses, turns about the part's box edges and slides along its normal) are scored by
+   projecting the part into the step's depth maps (:func:`projective_score`), the best refined by
+   robust point-to-plane ICP against the step's measured points and then by a pattern search on
+   the projective score (silhouettes pin what flat faces leave free). The part's model grows with
+   the measured points that moved in with it (a door's inner face, a drawer's sides).
+5. One revolute and one prismatic joint are fitted to all the part's poses jointly
+   (core.rigid.fit_joint); the part is revolute if it turns and a slide explains it clearly
+   worse. The joint is then refined on the measurements of all steps at once
+   (core.rigid.refine_joint) using the splat's own part points. A slide within ``snap_deg`` of the
+   part front's normal is taken along that normal (a flat front measures only that component).
+6. Joint values per step are ``states`` (positive = open), the observed range is ``limit``;
+   extent (oriented box of the part in the closed state), handle, bbox and confidence follow.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from scipy.ndimage import minimum_filter
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -39,12 +46,19 @@ from .rigid import (StepData, apply, fit_joint, icp, make_transform, refine_join
                     tukey_weights)
 
 
+#: The interaction time at which every part is closed (a camera's frame at this time, if it has
+#: one, is its closed state; other cameras render the static splat instead).
+CLOSED_TIME = 0
+
+
 @dataclass
 class MotionConfig:
     """Tuning of the motion route (defaults suit 2 mm-class depth noise)."""
 
-    noise_sigmas: float = 5.0         # change threshold = this many noise sigmas ...
+    noise_sigmas: float = 5.0         # change threshold = this many noise sigmas (of a difference)
     min_threshold: float = 0.006      # ... but at least this (m)
+    render_sigmas: float = 3.0        # closed state rendered from the splat: this many sigmas of
+    render_threshold: float = 0.03    # its error, or this (m) when that cannot be measured
     min_opacity: float = 0.5          # splat points used as closed-state geometry
     link_pixels: float = 3.0          # 3D connectivity radius, in static-point spacings
     min_part_points: int = 40         # smaller groups of vanished points are noise
@@ -71,9 +85,20 @@ class View:
     mask: dict[int, np.ndarray | None]
     ref: np.ndarray
     ref_source: str
-    threshold: float = 0.0
+    threshold: float = 0.0            # change threshold between measurements (m)
+    ref_threshold: float = 0.0        # ... between a measurement and the closed state (m)
     rays: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
-    ranges: dict[int | str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
+    ranges: dict[int | str, Any] = field(default_factory=dict, repr=False)   # per-step caches
+
+    def changed_at(self, t: int) -> np.ndarray:
+        """Pixels whose surface at step ``t`` is not the closed state's (boolean image). With a
+        rendered closed state, :func:`mark_changed` sets these from the splat's geometry."""
+        key = f"changed{t}"
+        if key not in self.ranges:
+            d = self.depth[t]
+            self.ranges[key] = (d > 0) & ((self.ref <= 0)
+                                          | (np.abs(d - self.ref) > self.ref_threshold))
+        return self.ranges[key]
 
     def range_at(self, t: int | str) -> tuple[np.ndarray, np.ndarray]:
         """Near and far depth of each pixel's surface at step ``t`` (``"ref"``: closed state), see
@@ -81,6 +106,25 @@ class View:
         if t not in self.ranges:
             self.ranges[t] = depth_range(self.ref if t == "ref" else self.depth[t])
         return self.ranges[t]
+
+
+def mark_changed(views: list[View], points: np.ndarray, spacing: float) -> None:
+    """For views whose closed state is a render: a pixel changed when its measured point is
+    farther than ``max(threshold, 1.5 spacing)`` from every splat point (a render's error is too
+    large to compare depths with)."""
+    tree = None
+    for v in views:
+        if v.ref_source != "splat":
+            continue
+        if tree is None:
+            tree = cKDTree(points)
+        tol = max(v.threshold, 1.5 * spacing)
+        for t, d in v.depth.items():
+            P, _, _ = _grid_points(v, d)
+            valid = d > 0
+            far = np.zeros(d.shape, bool)
+            far[valid] = tree.query(P[valid], distance_upper_bound=tol)[0] > tol
+            v.ranges[f"changed{t}"] = far
 
 
 def depth_range(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -116,7 +160,7 @@ def group_views(frames: list[Frame]) -> list[list[Frame]]:
 def make_views(capture: Capture, render_depth, config: MotionConfig) -> list[View]:
     """Views of the interaction cameras; ``render_depth(camera) -> (H,W)`` gives the closed state
     where a camera has no time-0 frame."""
-    t0 = min(capture.times)
+    t0 = CLOSED_TIME
     views = []
     for k, g in enumerate(group_views(capture.interaction)):
         depth = {f.time: _depth(f) for f in g}
@@ -126,7 +170,7 @@ def make_views(capture: Capture, render_depth, config: MotionConfig) -> list[Vie
         else:
             ref, source = render_depth(g[0].camera).astype(np.float32), "splat"
         v = View(f"cam{k}", g[0].camera, depth, mask, ref, source)
-        v.threshold = _threshold(v, config)
+        v.threshold, v.ref_threshold = _thresholds(v, config, source == "splat")
         v.rays = g[0].camera.pixel_rays()
         views.append(v)
     return views
@@ -139,23 +183,38 @@ def _depth(f: Frame) -> np.ndarray:
     return d
 
 
-def _threshold(v: View, config: MotionConfig) -> float:
-    """Change threshold of a view from the robust spread of its depth differences."""
-    diffs = []
-    for t, d in v.depth.items():
-        ok = (d > 0) & (v.ref > 0)
+def noise_sigma(depths: list[np.ndarray]) -> float:
+    """Depth noise (m, one sigma) from second differences along image rows on smooth surfaces
+    (median over the images; a robust spread, so edges do not count)."""
+    sigmas = []
+    for d in depths:
+        a, b, c = d[:, :-2], d[:, 1:-1], d[:, 2:]
+        ok = (a > 0) & (b > 0) & (c > 0)
         if ok.sum() > 20:
-            diffs.append(np.abs(d[ok] - v.ref[ok]))
-    if not diffs:
-        return config.min_threshold
-    sigma = 1.4826 * float(np.median(np.concatenate(diffs))) / math.sqrt(2.0)
-    return max(config.noise_sigmas * sigma, config.min_threshold)
+            sigmas.append(1.4826 * float(np.median(np.abs(a + c - 2 * b)[ok])) / math.sqrt(6.0))
+    return float(np.median(sigmas)) if sigmas else 0.0
+
+
+def _thresholds(v: View, config: MotionConfig, rendered: bool) -> tuple[float, float]:
+    """Change thresholds of a view: between two measurements, and between a measurement and the
+    closed state (larger when the closed state is a render of the splat: its error on pixels that
+    no step changes sets it)."""
+    thr = max(config.noise_sigmas * math.sqrt(2.0) * noise_sigma(list(v.depth.values())),
+              config.min_threshold)
+    if not rendered:
+        return thr, thr
+    stack = np.stack(list(v.depth.values()))
+    still = np.all(stack > 0, axis=0) & (stack.max(0) - stack.min(0) < thr) & (v.ref > 0)
+    if still.sum() < 20:
+        return thr, max(thr, config.render_threshold)
+    err = float(np.median(np.abs(np.median(stack, axis=0) - v.ref)[still]))
+    return thr, max(thr, config.render_sigmas * 1.4826 * err)
 
 
 def _lookup(v: View, t: int | str, points: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Project world points into ``v`` at step ``t``: inside-image flags, their z-depth, and the
-    3x3 depth range (near, far) at their pixels (0 = no object there)."""
+    depth range (near, far) of the surface at their pixels (0 = no object there)."""
     uv, z = v.camera.project(points)
     lo_img, hi_img = v.range_at(t)
     h, w = lo_img.shape
@@ -172,22 +231,72 @@ def _lookup(v: View, t: int | str, points: np.ndarray
 
 # --- vanished points and parts ------------------------------------------------------------------
 
-def vanish_times(points: np.ndarray, views: list[View], times: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """Per point: first step at which a view sees through it (-1: never), and how many times."""
+def vanish_times(points: np.ndarray, views: list[View], times: list[int], spacing: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: first step at which a view sees through it (-1: never), and how many times.
+    ``spacing``: the points' typical spacing (m)."""
     first = np.full(len(points), -1, np.int64)
     count = np.zeros(len(points), np.int64)
     for v in views:
         inside, z, lo, hi = _lookup(v, "ref", points)
-        seen = inside & (lo > 0) & (z > lo - v.threshold) & (z < hi + v.threshold)
+        if v.ref_source == "splat":   # splat points scatter about a spacing around surfaces
+            seen = _front_points(v, points, z, inside, spacing) & (z < hi + v.ref_threshold)
+            margin = max(v.threshold, 1.5 * spacing)
+        else:
+            seen = inside & (lo > 0) & (z > lo - v.threshold) & (z < hi + v.threshold)
+            margin = v.threshold
         for t in times:
             if t not in v.depth:
                 continue
             _, _, d, _ = _lookup(v, t, points)
-            gone = seen & ((d - z > v.threshold) | (d <= 0) & (v.mask[t] is not None))
+            # background where the part was counts only against a measured closed state (the
+            # render's silhouette is blurred: points at its rim would all seem gone)
+            empty = (d <= 0) & (v.mask[t] is not None) & (v.ref_source != "splat")
+            gone = seen & ((d - z > margin) | empty)
             count += gone
             new = gone & ((first < 0) | (first > t))
             first[new] = t
     return first, count
+
+
+def _front_points(v: View, points: np.ndarray, z: np.ndarray, inside: np.ndarray,
+                  spacing: float) -> np.ndarray:
+    """Which points are in front in ``v``: within ``max(threshold, 1.5 spacing)`` of the nearest
+    point over their pixel (a point z-buffer; empty pixels take their 3x3 neighbourhood's). A
+    rendered closed state blends depth layers, too loosely to tell the front points."""
+    h, w = v.ref.shape
+    uv, _ = v.camera.project(points)
+    pix = np.full(len(points), -1, np.int64)
+    pix[inside] = (np.floor(uv[inside, 1]).astype(np.int64) * w
+                   + np.floor(uv[inside, 0]).astype(np.int64))
+    zbuf = np.full(h * w, np.inf)
+    np.minimum.at(zbuf, pix[inside], z[inside])
+    zbuf = zbuf.reshape(h, w)
+    zbuf = np.where(np.isfinite(zbuf), zbuf, minimum_filter(zbuf, size=3, mode="nearest"))
+    seen = np.zeros(len(points), bool)
+    seen[inside] = z[inside] < zbuf.reshape(-1)[pix[inside]] + max(v.threshold, 1.5 * spacing)
+    return seen
+
+
+def floaters(points: np.ndarray, frames: list[Frame], margin: float) -> np.ndarray:
+    """Splat points that two or more static views see through (measured depth beyond the point
+    by more than ``margin``): nothing moves in the static views, so these float off the surface
+    and would pass for vanished part points."""
+    through = np.zeros(len(points), np.int64)
+    for f in frames:
+        if f.depth is None:
+            continue
+        lo, _ = depth_range(_depth(f))
+        uv, z = f.camera.project(points)
+        h, w = lo.shape
+        with np.errstate(invalid="ignore"):
+            j = np.floor(uv[:, 0]).astype(np.int64)
+            i = np.floor(uv[:, 1]).astype(np.int64)
+        inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
+        d = np.zeros(len(points))
+        d[inside] = lo[i[inside], j[inside]]
+        through += (d > 0) & (d - z > margin)
+    return through >= 2
 
 
 def group_parts(points: np.ndarray, first: np.ndarray, radius: float, min_points: int
@@ -223,7 +332,7 @@ def step_cloud(views: list[View], t: int) -> tuple[np.ndarray, np.ndarray, np.nd
         sel = ok.reshape(-1)
         pts.append(P.reshape(-1, 3)[sel])
         nrm.append(N.reshape(-1, 3)[sel])
-        ahead = (d > 0) & ((v.ref <= 0) | (d < v.ref - v.threshold))
+        ahead = (d > 0) & ((v.ref <= 0) | (d < v.ref - v.ref_threshold))
         moved.append(ahead.reshape(-1)[sel])
     if not pts:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, bool)
@@ -259,24 +368,43 @@ def _grid_points(v: View, d: np.ndarray, step: int = 2) -> tuple[np.ndarray, np.
 
 # --- tracking ---------------------------------------------------------------------------------
 
-def projective_score(points: np.ndarray, views: list[View], t: int) -> float:
-    """Agreement of part points placed at step ``t`` with the depth maps, per point (-1..1).
+def projective_score(points: np.ndarray, T: np.ndarray, views: list[View], t: int) -> float:
+    """Agreement of closed-state part ``points`` placed by ``T`` at step ``t`` with the depth maps,
+    per point (-1..1).
 
-    A point on a measured surface scores up to 1 (less as it nears the threshold); one in front of
-    a measured surface, or over a pixel showing no object, scores -1 (it would have been seen);
-    a hidden point (behind the surface) or one outside every view scores 0. The best view counts.
+    A point on a measured surface scores up to 1 (less as it nears the threshold), provided the
+    pixel changed since the closed state or the point stayed near its closed place (a moved part
+    cannot sit on geometry that was already there); one in front of a measured surface, or over a
+    pixel showing no object, scores -1 (it would have been seen); a hidden point (behind the
+    surface) or one outside every view scores 0. The best view counts.
     """
-    best = np.zeros(len(points))
-    wrong = np.zeros(len(points), bool)
+    Y = apply(T, points)
+    stayed = np.linalg.norm(Y - points, axis=1)
+    best = np.zeros(len(Y))
+    wrong = np.zeros(len(Y), bool)
     for v in views:
         if t not in v.depth:
             continue
-        inside, z, lo, hi = _lookup(v, t, points)
+        inside, z, lo, hi = _lookup(v, t, Y)
         has = inside & (lo > 0)
         off = np.maximum(np.maximum(lo - z, z - hi), 0.0) / v.threshold
-        best = np.maximum(best, np.where(has & (off < 1), 1.0 - off * off, 0.0))
+        new = _lookup_image(v, v.changed_at(t), Y) | (stayed < 2 * v.threshold)
+        best = np.maximum(best, np.where(has & new & (off < 1), 1.0 - off * off, 0.0))
         wrong |= (has & (z < lo - v.threshold)) | (inside & (lo <= 0) & (v.mask[t] is not None))
-    return float(np.where(best > 0, best, -wrong.astype(float)).sum()) / max(len(points), 1)
+    return float(np.where(best > 0, best, -wrong.astype(float)).sum()) / max(len(Y), 1)
+
+
+def _lookup_image(v: View, image: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Values of a boolean image at the points' pixels (False outside)."""
+    uv, z = v.camera.project(points)
+    h, w = image.shape
+    with np.errstate(invalid="ignore"):
+        j = np.floor(uv[:, 0]).astype(np.int64)
+        i = np.floor(uv[:, 1]).astype(np.int64)
+    inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
+    out = np.zeros(len(points), bool)
+    out[inside] = image[i[inside], j[inside]]
+    return out
 
 
 def polish(T: np.ndarray, points: np.ndarray, views: list[View], t: int, step: float,
@@ -286,7 +414,7 @@ def polish(T: np.ndarray, points: np.ndarray, views: list[View], t: int, step: f
     ``min_step``). Silhouettes pin what flat faces leave free in point-to-plane ICP."""
     c = apply(T, points).mean(axis=0)
     size = max(float(np.linalg.norm(points - points.mean(axis=0), axis=1).max()), 1e-3)
-    best = projective_score(apply(T, points), views, t)
+    best = projective_score(points, T, views, t)
     while step >= min_step:
         improved = False
         for k in range(6):
@@ -297,7 +425,7 @@ def polish(T: np.ndarray, points: np.ndarray, views: list[View], t: int, step: f
                     R = rotation_about_axis(np.eye(3)[k - 3], sign * step / size)
                     D = make_transform(R, c - R @ c)
                 cand = D @ T
-                s = projective_score(apply(cand, points), views, t)
+                s = projective_score(points, cand, views, t)
                 if s > best + 1e-6:
                     best, T, improved = s, cand, True
         if not improved:
@@ -396,14 +524,14 @@ def track_part(points: np.ndarray, views: list[View], times: list[int], start: i
             hyps.append(predicted)
         hyps += prev[:-1]   # the part may go back through earlier poses (closing)
         hyps += [H @ base for H in first_move_hypotheses(apply(base, points))]
-        scored = sorted(hyps, key=lambda H: -projective_score(apply(H, model), views, t))
+        scored = sorted(hyps, key=lambda H: -projective_score(model, H, views, t))
         P, N, tree, moved = clouds[t]
         best = None
         for H in scored[:config.icp_candidates]:
             res = icp(model, P, N, H, tree=tree, max_distance=max(0.05, 4 * thr),
                       min_distance=thr / 2, iterations=config.icp_iterations,
                       keep=_visible(views, t))
-            s = projective_score(apply(res.T, model), views, t)
+            s = projective_score(model, res.T, views, t)
             if predicted is not None:
                 s -= config.jump_penalty * _jump(res.T, predicted, model)
             if best is None or s > best[0]:
@@ -450,7 +578,9 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
     views = make_views(capture, render_depth, cfg)
     pts = np.asarray(splat_means, float)[np.asarray(splat_opacity) >= cfg.min_opacity]
     spacing = float(np.median(cKDTree(pts).query(pts, k=2)[0][:, 1])) if len(pts) > 1 else 0.01
-    first, count = vanish_times(pts, views, times)
+    pts = pts[~floaters(pts, capture.static, max(cfg.min_threshold, 1.5 * spacing))]
+    mark_changed(views, pts, spacing)
+    first, count = vanish_times(pts, views, times, spacing)
     first[count < 2] = -1
     min_points = max(cfg.min_part_points, int(cfg.min_part_fraction * len(pts)))
     parts = group_parts(pts, first, cfg.link_pixels * spacing, min_points)
@@ -495,7 +625,8 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
     meta = {"method": "motion",
             "view": _view_meta(views[0]) if views else None,
             "cameras": [{"name": v.name, "closed_state": v.ref_source,
-                         "threshold_mm": 1000 * v.threshold} for v in views],
+                         "threshold_mm": 1000 * v.threshold,
+                         "closed_state_threshold_mm": 1000 * v.ref_threshold} for v in views],
             "motion": diagnostics}
     return joints, meta
 
