@@ -46,9 +46,10 @@ def exp_neg(x):
 
 @njit(cache=True)
 def spread_stride(n):
-    """A stride coprime with n near 0.618 n: iteration i -> tile (i * stride) % n visits every
-    tile once and spreads any contiguous run of iterations over the whole image, so prange's
-    contiguous per-thread split stays balanced when the content is in one part of the image."""
+    """A stride coprime with n near 0.618 n: i -> (i * stride) % n visits 0..n-1 once each and
+    spreads any contiguous run of i over the whole range. Used on rows of tiles, so prange's
+    contiguous per-thread split stays balanced when the content is in one part of the image
+    (tiles within a row stay in order, for cache locality)."""
     stride = max(1, int(n * 0.6180339887))
     while True:
         a, b = stride, n
@@ -123,10 +124,9 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
     tile-list entries up to its last contributor."""
     tiles_x = (width + TILE_W - 1) // TILE_W
     tiles_y = (height + TILE_H - 1) // TILE_H
-    n_tiles = tiles_x * tiles_y
-    stride = spread_stride(n_tiles)
-    for it in prange(n_tiles):
-        t = (it * stride) % n_tiles
+    stride = spread_stride(tiles_y)
+    for it in prange(tiles_x * tiles_y):
+        t = ((it // tiles_x) * stride) % tiles_y * tiles_x + it % tiles_x
         i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
         px = np.empty(NPIX, np.float32)
         py = np.empty(NPIX, np.float32)
@@ -182,10 +182,9 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
     """Gradients w.r.t. ``feats`` summed into per-thread buffers ``grads`` (threads, M, 10)."""
     tiles_x = (width + TILE_W - 1) // TILE_W
     tiles_y = (height + TILE_H - 1) // TILE_H
-    n_tiles = tiles_x * tiles_y
-    stride = spread_stride(n_tiles)
-    for it in prange(n_tiles):
-        t = (it * stride) % n_tiles
+    stride = spread_stride(tiles_y)
+    for it in prange(tiles_x * tiles_y):
+        t = ((it // tiles_x) * stride) % tiles_y * tiles_x + it % tiles_x
         buf = grads[numba.get_thread_id()]
         i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
         px = np.empty(NPIX, np.float32)
