@@ -2,7 +2,7 @@
 
 1. Initialise from the back-projected masked depth of every training view, voxel-downsampled
    (:func:`initial_splats`): colour from the pixels (SH DC), isotropic scale from the pixel
-   footprint (depth / focal), identity rotation, opacity 0.9.
+   footprint (depth / focal), identity rotation, opacity 0.95.
 2. Optimise with Adam (per-parameter learning rates as in 3DGS, means' rate decaying) one random
    training view per step: ``L1 + 0.2 (1 - SSIM)`` of the render (black background) against the
    masked image, ``+ depth L1`` (alpha-normalised expected depth vs measured depth, where measured
@@ -48,26 +48,26 @@ STAGE = "reconstruct"
 class ReconstructConfig:
     """Optimisation settings (defaults tuned on the synthetic benchmark, 160x120, 24 views)."""
 
-    max_iterations: int = 3000          # cap when no explicit iteration count is given
+    max_iterations: int = 1500          # cap when no explicit iteration count is given
     sh_degree: int = 1
     lambda_ssim: float = 0.2
-    lambda_depth: float = 1.0           # weight of depth L1 measured in units of 1% of the object size
+    lambda_depth: float = 0.1           # weight of depth L1 measured in units of 1% of the object size
     lambda_alpha: float = 0.5
-    init_opacity: float = 0.9
+    init_opacity: float = 0.95
     voxel_pixels: float = 1.0           # init voxel = this many median pixel footprints
-    init_scale: float = 0.5             # init standard deviation, in pixel footprints
-    lr_means: float = 1.6e-4            # x object size, decaying to 1% of it
+    init_scale: float = 0.3             # init standard deviation, in pixel footprints
+    lr_means: float = 1.6e-5            # x object size, decaying to 1% of it
     lr_sh0: float = 2.5e-3
     lr_shN: float = 2.5e-3 / 20
-    lr_opacity: float = 0.05
-    lr_scales: float = 5e-3
+    lr_opacity: float = 0.01
+    lr_scales: float = 2e-3
     lr_quats: float = 1e-3
     densify_every: int = 100
     densify_from: int = 100
-    densify_until: float = 0.6          # fraction of the cap
+    densify_until: int = 500            # last densification iteration
     densify: DensifyConfig = field(default_factory=DensifyConfig)
     plateau_window: int = 200           # iterations per convergence check
-    plateau_tol: float = 0.005          # stop when the window mean loss drops by less than this
+    plateau_tol: float = 0.02           # stop when the window mean loss drops by less than this
     seed: int = 0
 
 
@@ -115,7 +115,7 @@ def _render(params: dict[str, torch.Tensor], v: _View, backend: str):
 # --- initialisation ------------------------------------------------------------------------------
 
 def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: float = 1.0,
-                   scale: float = 0.5, opacity: float = 0.9) -> tuple[SplatArrays, float]:
+                   scale: float = 0.3, opacity: float = 0.95) -> tuple[SplatArrays, float]:
     """Gaussians from the frames' back-projected masked depth, voxel-downsampled.
 
     Returns the splat and the voxel size (metres) = ``voxel_pixels`` median pixel footprints
@@ -178,6 +178,74 @@ def evaluate(params: dict[str, torch.Tensor], views: list[_View], backend: str) 
 
 # --- optimisation --------------------------------------------------------------------------------
 
+class Trainer:
+    """The optimisation state: training views, Gaussians in an :class:`Adam`, densifier."""
+
+    def __init__(self, frames: list[Frame], train_idx: list[int], cap: int,
+                 cfg: ReconstructConfig, device: torch.device, backend: str = "auto") -> None:
+        self.cfg, self.cap, self.backend = cfg, cap, backend
+        self.train_idx = list(train_idx)
+        self.init, self.voxel = initial_splats(
+            [frames[i] for i in train_idx], sh_degree=cfg.sh_degree,
+            voxel_pixels=cfg.voxel_pixels, scale=cfg.init_scale, opacity=cfg.init_opacity)
+        self.views = [_view(i, frames[i], device) for i in train_idx]
+        s = self.init
+        self.size = float(np.linalg.norm(s.means.max(0) - s.means.min(0)))
+        params = {"means": s.means, "quats": s.quats, "log_scales": s.log_scales,
+                  "opacity_logits": s.opacity_logits, "sh0": s.sh[:, :1], "shN": s.sh[:, 1:]}
+        self.lrs = {"means": cfg.lr_means * self.size, "quats": cfg.lr_quats,
+                    "log_scales": cfg.lr_scales, "opacity_logits": cfg.lr_opacity,
+                    "sh0": cfg.lr_sh0, "shN": cfg.lr_shN}
+        self.opt = Adam({k: torch.as_tensor(v, device=device) for k, v in params.items()},
+                        self.lrs)
+        self.densifier = Densifier(len(s), cfg.densify)
+        self.depth_unit = 0.01 * self.size
+        self.rng = np.random.default_rng(cfg.seed)
+        self.order: list[int] = []
+        self.it = 0
+
+    @property
+    def params(self) -> dict[str, torch.Tensor]:
+        return self.opt.params
+
+    def step(self) -> tuple[torch.Tensor, Any, _View]:
+        """One iteration on the next training view; returns (loss, render, view)."""
+        cfg = self.cfg
+        self.it += 1
+        it = self.it
+        if not self.order:
+            self.order = list(self.rng.permutation(len(self.views)))
+        v = self.views[self.order.pop()]
+        self.opt.lrs["means"] = self.lrs["means"] * 0.01 ** min(it / self.cap, 1.0)
+        p = self.opt.params
+        r = _render(p, v, self.backend)
+        l1 = (r.rgb - v.rgb).abs().mean()
+        loss = (1 - cfg.lambda_ssim) * l1 + cfg.lambda_ssim * (1 - ssim(r.rgb, v.rgb))
+        if cfg.lambda_depth and v.depth_valid.any():
+            loss = loss + cfg.lambda_depth / self.depth_unit * \
+                (r.depth - v.depth)[v.depth_valid].abs().mean()
+        if cfg.lambda_alpha:
+            loss = loss + cfg.lambda_alpha * (r.alpha - v.mask).abs().mean()
+        self.opt.zero_grad()
+        loss.backward()
+        densify_now = it <= min(cfg.densify_until, self.cap)
+        if densify_now:
+            self.densifier.accumulate(p["means"].detach(), p["means"].grad, v.w2c, v.K,
+                                      v.width, v.height)
+        self.opt.step()
+        if densify_now and it >= cfg.densify_from and it % cfg.densify_every == 0:
+            self.densifier.step(self.opt)
+        return loss.detach(), r, v
+
+    def splat(self) -> SplatArrays:
+        """The current Gaussians as numpy arrays."""
+        f = {k: v.detach().cpu() for k, v in self.opt.params.items()}
+        return SplatArrays(means=f["means"].numpy(), quats=f["quats"].numpy(),
+                           log_scales=f["log_scales"].numpy(),
+                           opacity_logits=f["opacity_logits"].numpy(),
+                           sh=torch.cat([f["sh0"], f["shN"]], 1).numpy())
+
+
 def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
                 iterations: int | None = None, holdout: int = 0, device: str = "auto",
                 backend: str = "auto", config: ReconstructConfig | None = None) -> dict[str, Any]:
@@ -201,87 +269,47 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
     dev = resolve_device(device)
     torch.manual_seed(cfg.seed)
     held = holdout_indices(len(static), holdout)
-    train_idx = [i for i in range(len(static)) if i not in held]
-    splats, voxel = initial_splats([static[i] for i in train_idx], sh_degree=cfg.sh_degree,
-                                   voxel_pixels=cfg.voxel_pixels, scale=cfg.init_scale,
-                                   opacity=cfg.init_opacity)
-    train = [_view(i, static[i], dev) for i in train_idx]
-    size = float(np.linalg.norm(splats.means.max(0) - splats.means.min(0)))
     cap = iterations or cfg.max_iterations
+    trainer = Trainer(static, [i for i in range(len(static)) if i not in held], cap, cfg, dev,
+                      backend)
+    progress.log(f"reconstruct: {len(trainer.views)} training views, held out {held}, "
+                 f"{len(trainer.init)} initial Gaussians (voxel {1000 * trainer.voxel:.1f} mm)")
 
-    params = {"means": splats.means, "quats": splats.quats, "log_scales": splats.log_scales,
-              "opacity_logits": splats.opacity_logits, "sh0": splats.sh[:, :1],
-              "shN": splats.sh[:, 1:]}
-    lrs = {"means": cfg.lr_means * size, "quats": cfg.lr_quats, "log_scales": cfg.lr_scales,
-           "opacity_logits": cfg.lr_opacity, "sh0": cfg.lr_sh0, "shN": cfg.lr_shN}
-    opt = Adam({k: torch.as_tensor(v, device=dev) for k, v in params.items()}, lrs)
-    densifier = Densifier(len(splats), cfg.densify)
-    depth_unit = 0.01 * size
-    progress.log(f"reconstruct: {len(train)} training views, held out {held}, "
-                 f"{len(splats)} initial Gaussians (voxel {1000 * voxel:.1f} mm)")
-
-    rng = np.random.default_rng(cfg.seed)
-    order: list[int] = []
     window: list[float] = []
     prev_window = math.inf
-    it = 0
     stopped = "cap"
-    for it in range(1, cap + 1):
-        if not order:
-            order = list(rng.permutation(len(train)))
-        v = train[order.pop()]
-        opt.lrs["means"] = lrs["means"] * 0.01 ** min(it / cap, 1.0)
-        p = opt.params
-        r = _render(p, v, backend)
-        l1 = (r.rgb - v.rgb).abs().mean()
-        loss = (1 - cfg.lambda_ssim) * l1 + cfg.lambda_ssim * (1 - ssim(r.rgb, v.rgb))
-        if v.depth_valid.any():
-            loss = loss + cfg.lambda_depth / depth_unit * \
-                (r.depth - v.depth)[v.depth_valid].abs().mean()
-        loss = loss + cfg.lambda_alpha * (r.alpha - v.mask).abs().mean()
-        opt.zero_grad()
-        loss.backward()
-        densify_now = it <= cfg.densify_until * cap
-        if densify_now:
-            densifier.accumulate(p["means"].detach(), p["means"].grad, v.w2c, v.K, v.width,
-                                 v.height)
-        opt.step()
-        if densify_now and it >= cfg.densify_from and it % cfg.densify_every == 0:
-            densifier.step(opt)
-
-        window.append(loss.item())
+    while trainer.it < cap:
+        loss, r, v = trainer.step()
+        it = trainer.it
+        window.append(float(loss))
         if it % 25 == 0 or it == cap:
             with torch.no_grad():
                 mse = float(((r.rgb - v.rgb) ** 2)[v.mask.bool()].mean())
                 mae = float((r.depth - v.depth)[v.depth_valid].abs().mean()) * 1000
-            progress.update(STAGE, it / cap, f"iteration {it}/{cap}", loss=loss.item(),
+            progress.update(STAGE, it / cap, f"iteration {it}/{cap}", loss=float(loss),
                             psnr=-10 * math.log10(max(mse, 1e-12)), depth_mm=mae,
-                            gaussians=int(opt.params["means"].shape[0]))
+                            gaussians=int(trainer.params["means"].shape[0]))
         else:
             progress.check_cancel()
         if len(window) == cfg.plateau_window:
             cur = float(np.mean(window))
             window = []
-            if iterations is None and it > cfg.densify_until * cap \
+            if iterations is None and it > cfg.densify_until \
                     and prev_window - cur < cfg.plateau_tol * prev_window:
                 stopped = "converged"
                 break
             prev_window = cur
 
-    final = {k: v.detach() for k, v in opt.params.items()}
-    result = SplatArrays(means=final["means"].cpu().numpy(), quats=final["quats"].cpu().numpy(),
-                         log_scales=final["log_scales"].cpu().numpy(),
-                         opacity_logits=final["opacity_logits"].cpu().numpy(),
-                         sh=torch.cat([final["sh0"], final["shN"]], 1).cpu().numpy())
-    train_seconds = time.perf_counter() - t0
+    result = trainer.splat()
     figures: dict[str, Any] = {
-        "iterations": it, "stopped": stopped, "gaussians": len(result),
-        "initial_gaussians": len(splats), "train_seconds": round(train_seconds, 2),
+        "iterations": trainer.it, "stopped": stopped, "gaussians": len(result),
+        "initial_gaussians": len(trainer.init),
+        "train_seconds": round(time.perf_counter() - t0, 2),
         "final_loss": float(np.mean(window)) if window else prev_window,
         "holdout_views": [static[i].index for i in held],
     }
     if held:
-        ev = evaluate(final, [_view(i, static[i], dev) for i in held], backend)
+        ev = evaluate(trainer.params, [_view(i, static[i], dev) for i in held], backend)
         figures.update(holdout_psnr=ev["psnr"], holdout_depth_mae_mm=ev["depth_mae_mm"])
     write_ply(Path(out) / outdir.SPLAT, result)
     figures["seconds"] = round(time.perf_counter() - t0, 2)
