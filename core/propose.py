@@ -1,9 +1,10 @@
 """``artgs propose``: initial joints from motion (default) or a VLM -> OUT/proposals.json.
 
 Reads OUT/splat.ply (from ``artgs reconstruct``) and the capture; writes OUT/proposals.json
-atomically (articulation.json schema plus per-joint ``source``, ``confidence``, ``bbox``, ``handle``,
-``extent``; top-level ``source`` = the method and the route's ``meta``) and records the stage in
-OUT/report.json. Bad input is refused before any work; on failure nothing in OUT is touched.
+atomically (articulation.json schema plus per-joint ``source``, ``confidence``, ``bbox``,
+``handle``, ``extent``; top-level ``source`` = the method and the route's ``meta``) and records
+the stage in OUT/report.json. Bad input is refused before any work; on failure nothing in OUT
+is touched.
 """
 
 from __future__ import annotations

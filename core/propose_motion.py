@@ -71,7 +71,8 @@ class MotionConfig:
     jump_penalty: float = 0.5         # score cost of a pose far from the constant-velocity guess
     grow_score: float = 0.3           # steps tracked at least this well add points to the part
     grow_depth: float = 0.1           # ... from at most this far behind its closed front (m)
-    refine_rounds: int = 4            # rounds of joint refinement on the measurements
+    refine_rounds: int = 10           # rounds of joint refinement on the measurements ...
+    refine_point_weight: float = 0.2  # ... with this weight of point-to-point residuals
     snap_deg: float = 25.0            # a slide this close to the front's normal is taken along it
 
 
@@ -143,7 +144,7 @@ def depth_range(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # --- views and thresholds ---------------------------------------------------------------------
 
 def group_views(frames: list[Frame]) -> list[list[Frame]]:
-    """Interaction frames grouped by fixed camera (same pose and intrinsics), each sorted by time."""
+    """Interaction frames grouped by fixed camera (same pose and intrinsics), sorted by time."""
     groups: list[list[Frame]] = []
     for f in frames:
         for g in groups:
@@ -339,7 +340,8 @@ def step_cloud(views: list[View], t: int) -> tuple[np.ndarray, np.ndarray, np.nd
     return np.concatenate(pts), np.concatenate(nrm), np.concatenate(moved)
 
 
-def _grid_points(v: View, d: np.ndarray, step: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _grid_points(v: View, d: np.ndarray, step: int = 2
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World points (H,W,3) of a depth map, normals from neighbours ``step`` pixels away, valid."""
     cam = v.rays * d[..., None]
     c2w = np.linalg.inv(v.camera.w2c)
@@ -488,7 +490,8 @@ def _jump(T: np.ndarray, predicted: np.ndarray, points: np.ndarray) -> float:
     change of speed explains (0 within 25 degrees and 10 cm of it)."""
     D = T @ np.linalg.inv(predicted)
     angle = math.degrees(rotation_log(D[:3, :3])[1])
-    shift = float(np.linalg.norm(apply(T, points).mean(axis=0) - apply(predicted, points).mean(axis=0)))
+    c = points.mean(axis=0, keepdims=True)
+    shift = float(np.linalg.norm(apply(T, c) - apply(predicted, c)))
     return max(0.0, (angle - 25.0) / 20.0) + max(0.0, (shift - 0.1) / 0.1)
 
 
@@ -595,7 +598,8 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
     diagnostics = []
     for k, idx in enumerate(parts):
         S = pts[idx]
-        St = S[rng.choice(len(S), cfg.track_points, replace=False)] if len(S) > cfg.track_points else S
+        St = S[rng.choice(len(S), cfg.track_points, replace=False)] \
+            if len(S) > cfg.track_points else S
         start = int(np.min(first[idx]))
         track = track_part(St, views, times, start, clouds, cfg)
         moving = [t for t in times if t >= start]
@@ -606,7 +610,7 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
         thr = float(np.median([v.threshold for v in views]))
         # the splat's own points of the part: unbiased by tracking (a turning face pins the hinge)
         fit = refine_joint(fit, St, steps, rounds=cfg.refine_rounds, min_distance=thr / 2,
-                           max_distance=max(0.05, 4 * thr))
+                           max_distance=max(0.05, 4 * thr), point_weight=cfg.refine_point_weight)
         snapped = None
         if fit.type == "prismatic":
             fit, snapped = _snap_to_front(fit, S, cfg.snap_deg)
@@ -615,12 +619,13 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
         joint = _make_joint(k, fit, values, moving, S, track, views, clouds)
         joints.append(joint)
         diagnostics.append({"name": joint.name, "points": int(len(S)), "first_step": start,
-                            "rms_revolute_mm": 1000 * fit.rms_revolute,
-                            "rms_prismatic_mm": 1000 * fit.rms_prismatic,
-                            "max_angle_deg": fit.max_angle_deg,
+                            "rms_revolute_mm": _finite(1000 * fit.rms_revolute),
+                            "rms_prismatic_mm": _finite(1000 * fit.rms_prismatic),
+                            "max_angle_deg": _finite(fit.max_angle_deg),
                             "snapped_to_front_deg": snapped,
-                            "score_min": float(min(track.score[t] for t in moving)),
-                            "icp_rms_mm": 1000 * float(np.median([track.rms[t] for t in moving]))})
+                            "score_min": _finite(min(track.score[t] for t in moving)),
+                            "icp_rms_mm": _finite(1000 * np.median([track.rms[t]
+                                                                    for t in moving]))})
         progress.update("propose", 0.1 + 0.9 * (k + 1) / len(parts), f"part {k + 1}: {joint.type}")
     meta = {"method": "motion",
             "view": _view_meta(views[0]) if views else None,
@@ -629,6 +634,12 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
                          "closed_state_threshold_mm": 1000 * v.ref_threshold} for v in views],
             "motion": diagnostics}
     return joints, meta
+
+
+def _finite(x: float) -> float | None:
+    """A JSON-safe figure (None when not finite), rounded."""
+    x = float(x)
+    return round(x, 4) if math.isfinite(x) else None
 
 
 def _view_meta(v: View) -> dict[str, Any]:
@@ -661,7 +672,8 @@ def _make_joint(k: int, fit, values: dict[int, float], moving: list[int], S: np.
     local = (part - c) @ box_axes.T
     blo, bhi = np.percentile(local, 0.5, axis=0), np.percentile(local, 99.5, axis=0)
     centre = c + ((blo + bhi) / 2) @ box_axes
-    extent = {"center": [float(x) for x in centre], "axes": [[float(x) for x in r] for r in box_axes],
+    extent = {"center": [float(x) for x in centre],
+              "axes": [[float(x) for x in r] for r in box_axes],
               "half_size": [float(x) for x in (bhi - blo) / 2]}
     # handle: the front of the part, farthest from the axis (revolute) / its middle (prismatic)
     front = S[(S - centre) @ n >= np.percentile((S - centre) @ n, 90)]
@@ -674,8 +686,9 @@ def _make_joint(k: int, fit, values: dict[int, float], moving: list[int], S: np.
     handle = {"point": [float(x) for x in hp], "approach": [float(x) for x in -n]}
     v0 = views[0]
     uv, _ = v0.camera.project(_corners(centre, box_axes, (bhi - blo) / 2))
-    bbox = [float(np.clip(uv[:, 0].min(), 0, v0.camera.width)), float(np.clip(uv[:, 1].min(), 0, v0.camera.height)),
-            float(np.clip(uv[:, 0].max(), 0, v0.camera.width)), float(np.clip(uv[:, 1].max(), 0, v0.camera.height))]
+    size = np.array([v0.camera.width, v0.camera.height], float)
+    lo_uv, hi_uv = np.clip(uv.min(axis=0), 0, size), np.clip(uv.max(axis=0), 0, size)
+    bbox = [float(lo_uv[0]), float(lo_uv[1]), float(hi_uv[0]), float(hi_uv[1])]
     quality = float(np.clip(np.median([track.score[t] for t in moving]), 0.0, 1.0))
     thr = float(np.median([v.threshold for v in views]))
     rms = fit.rms_revolute if fit.type == "revolute" else fit.rms_prismatic
@@ -723,7 +736,8 @@ def _snap_to_front(fit, S: np.ndarray, max_deg: float):
 
 def _fit_transforms(fit, times: list[int]) -> dict[int, np.ndarray]:
     """The fitted joint's motion (closed -> step) at each of ``times``."""
-    return {t: joint_transform(fit.type, fit.axis, fit.origin, v) for t, v in zip(times, fit.values)}
+    return {t: joint_transform(fit.type, fit.axis, fit.origin, v)
+            for t, v in zip(times, fit.values)}
 
 
 def _part_points(S: np.ndarray, fit, transforms: dict[int, np.ndarray], clouds) -> np.ndarray:

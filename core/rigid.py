@@ -227,7 +227,8 @@ def fit_joint(points: np.ndarray, transforms: list[np.ndarray], min_angle_deg: f
     Both models are fitted jointly over all steps by least squares on the moved points
     (``weights`` per step, default 1); the part is revolute when its largest rotation reaches
     ``min_angle_deg`` and the slide leaves ``min_ratio`` times the turn's RMS residual (tracking
-    drift turns drawers by a few degrees, but a slide still explains them about as well). Positive values open the part: the axis sign makes most values positive.
+    drift turns drawers by a few degrees, but a slide still explains them about as well).
+    Positive values open the part: the axis sign makes most values positive.
     """
     X = points
     if len(X) > 400:

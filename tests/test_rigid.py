@@ -1,4 +1,4 @@
-"""Rigid fitting: robust Kabsch, point-to-plane ICP and joint (screw) fits on synthetic point sets."""
+"""Rigid fitting: robust Kabsch, point-to-plane ICP and joint (screw) fits on synthetic points."""
 
 from __future__ import annotations
 
