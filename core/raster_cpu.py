@@ -19,17 +19,6 @@ def _f32(t: torch.Tensor) -> np.ndarray:
     return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float32)
 
 
-@numba.njit(parallel=True, cache=True)
-def _sum_to_rows(grads, order, out):
-    """out[order[m]] = sum over threads of grads[:, m] (out pre-zeroed)."""
-    for m in numba.prange(grads.shape[1]):
-        for f in range(grads.shape[2]):
-            s = np.float32(0.0)
-            for t in range(grads.shape[0]):
-                s += grads[t, m, f]
-            out[order[m], f] = s
-
-
 class _RasterizeCPU(torch.autograd.Function):
     """(means, quats, log_scales, opacity_logits, colors) -> colour sum (H,W,3) without
     background, alpha-weighted depth sum (H,W), alpha (H,W)."""
@@ -42,9 +31,8 @@ class _RasterizeCPU(torch.autograd.Function):
         extent = np.empty((n, 2), np.float32)
         visible = np.empty(n, np.bool_)
         pk.project_forward(*arrays, cam, width, height, np.float32(near), proj, extent, visible)
-        order = rk.depth_order(np.ascontiguousarray(proj[:, 9]), np.flatnonzero(visible))
-        feats = np.ascontiguousarray(proj[order])
-        offsets, ids = rk.bin_tiles(feats, np.ascontiguousarray(extent[order]), width, height)
+        order, feats, ext = rk.sort_visible(proj, extent, visible)
+        offsets, ids = rk.bin_tiles(feats, ext, width, height)
         out_c = np.empty((height, width, 3), np.float32)
         out_d = np.empty((height, width), np.float32)
         out_a = np.empty((height, width), np.float32)
@@ -52,7 +40,7 @@ class _RasterizeCPU(torch.autograd.Function):
         rk.blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n)
         ctx.saved = (arrays, cam, width, height, proj, visible, order, feats, offsets, ids,
                      out_a, out_n)
-        ctx.like = (means, quats, log_scales, opacity_logits, colors)
+        ctx.like = [(t.dtype, t.device) for t in (means, quats, log_scales, opacity_logits, colors)]
         dtype, device = means.dtype, means.device
         return tuple(torch.from_numpy(a).to(device=device, dtype=dtype)
                      for a in (out_c, out_d, out_a))
@@ -66,13 +54,13 @@ class _RasterizeCPU(torch.autograd.Function):
                           _grad(g_c, (height, width, 3)), _grad(g_d, (height, width)),
                           _grad(g_a, (height, width)), grads)
         g_proj = np.zeros_like(proj)
-        _sum_to_rows(grads, order, g_proj)
+        rk.sum_thread_grads(grads, order, g_proj)
         outs = [np.empty_like(a) for a in arrays]
         means, quats, log_scales = arrays[:3]
         pk.project_backward(means, quats, log_scales, cam, width, height, proj, visible, g_proj,
                             *outs)
-        result = [torch.from_numpy(g).to(device=t.device, dtype=t.dtype)
-                  for g, t in zip(outs, ctx.like)]
+        result = [torch.from_numpy(g).to(device=device, dtype=dtype)
+                  for g, (dtype, device) in zip(outs, ctx.like)]
         return (*result, None, None, None, None)
 
 

@@ -82,6 +82,18 @@ def depth_order(depths, candidates):
 
 
 @njit(cache=True)
+def sort_visible(proj, extent, visible):
+    """The visible rows of ``proj`` (N,10) front to back: (order, feats (M,10), extent (M,2))."""
+    order = depth_order(np.ascontiguousarray(proj[:, 9]), np.flatnonzero(visible))
+    feats = np.empty((order.shape[0], NF), np.float32)
+    ext = np.empty((order.shape[0], 2), np.float32)
+    for m in range(order.shape[0]):
+        feats[m] = proj[order[m]]
+        ext[m] = extent[order[m]]
+    return order, feats, ext
+
+
+@njit(cache=True)
 def bin_tiles(feats, extent, width, height):
     """Tile lists: ``offsets`` (tiles+1) and Gaussian ids (depth order kept inside each tile)."""
     tiles_x = (width + TILE_W - 1) // TILE_W
@@ -252,3 +264,14 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
             buf[g, 7] += s_g
             buf[g, 8] += s_b
             buf[g, 9] += s_d
+
+
+@njit(parallel=True, cache=True)
+def sum_thread_grads(grads, order, out):
+    """out[order[m]] = sum over threads of grads[:, m] (rows of ``out`` not in order untouched)."""
+    for m in prange(grads.shape[1]):
+        for f in range(grads.shape[2]):
+            s = _ZERO
+            for t in range(grads.shape[0]):
+                s += grads[t, m, f]
+            out[order[m], f] = s
