@@ -1,8 +1,6 @@
 """Add-on preferences: the engine interpreter, the VLM endpoint (key kept out of .blend files),
 the compute device and the preview point cap."""
 
-from __future__ import annotations
-
 import sys
 from pathlib import Path
 from types import SimpleNamespace
@@ -38,19 +36,6 @@ def get(context: bpy.types.Context | None = None):
 def engine_python(context: bpy.types.Context | None = None) -> str:
     """The interpreter that runs the engine (the preference, or the default when empty)."""
     return bpy.path.abspath(get(context).engine_python) or default_engine()
-
-
-def worker_env(context: bpy.types.Context | None = None) -> dict[str, str]:
-    """Environment for the worker: the VLM settings; the key only ever travels this way."""
-    prefs = get(context)
-    env = {}
-    if prefs.vlm_endpoint:
-        env["ARTGS_VLM_ENDPOINT"] = prefs.vlm_endpoint
-    if prefs.vlm_model:
-        env["ARTGS_VLM_MODEL"] = prefs.vlm_model
-    if prefs.vlm_api_key:
-        env["ARTGS_VLM_API_KEY"] = prefs.vlm_api_key
-    return env
 
 
 #: Outcome of the last "Check Engine" (kept in memory only, shown in the preferences).

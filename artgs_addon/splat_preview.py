@@ -1,0 +1,55 @@
+"""Splat preview: a point cloud of the Gaussians' centres, coloured by their SH DC term.
+
+Each point keeps the Gaussian's size (``radius``: geometric mean of the three scales, grown by
+the square root of the thinning when the preview is capped) and ``opacity`` (sigmoid of the logit).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from ..core.ply import SplatArrays, read_ply
+from .pointcloud import point_cloud_object, subsample
+
+#: Degree-0 real spherical harmonic Y_0^0 (core.sh.C0): colour = 0.5 + C0 * dc.
+SH_C0 = 0.5 / math.sqrt(math.pi)
+
+
+@dataclass
+class SplatPreview:
+    obj: bpy.types.Object
+    gaussians: int
+    points: int
+    seconds: float
+
+
+def splat_colors(splats: SplatArrays) -> np.ndarray:
+    """View-independent colour (N,3) in 0..1 (sRGB-encoded, as the capture images are)."""
+    return np.clip(0.5 + SH_C0 * splats.sh[:, 0, :], 0.0, 1.0)
+
+
+def build_splat_preview(context: bpy.types.Context, path: str | Path, cap: int,
+                        collection: bpy.types.Collection | None = None) -> SplatPreview:
+    """Read a 3DGS PLY (errors name the file) and add its preview, at most ``cap`` points."""
+    path = Path(path)
+    splats = read_ply(path)
+    t0 = time.perf_counter()
+    total = len(splats)
+    keep = subsample(total, cap)
+    sel = slice(None) if keep is None else keep
+    thinning = 1.0 if keep is None else math.sqrt(total / len(keep))
+    radius = np.exp(splats.log_scales[sel].astype(np.float64).mean(axis=1)) * thinning
+    opacity = 1.0 / (1.0 + np.exp(-splats.opacity_logits[sel].astype(np.float64)))
+    collection = collection or context.scene.collection
+    name = f"{path.parent.name} splat" if path.parent.name else "splat"
+    obj = point_cloud_object(name, splats.means[sel], splat_colors(splats)[sel], radius,
+                             collection, extra={"opacity": opacity})
+    obj["artgs_splat"] = str(path)
+    obj["artgs_gaussians"] = total
+    return SplatPreview(obj, total, len(obj.data.vertices), time.perf_counter() - t0)

@@ -1,0 +1,94 @@
+"""Reconstruct Splat (worker ``artgs reconstruct``) and Import Splat PLY (a preview of a 3DGS PLY)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import bpy
+from bpy.props import IntProperty, StringProperty
+
+from ..artgs_addon import preferences
+from ..artgs_addon.splat_preview import build_splat_preview
+from ..artgs_addon.worker import WorkerResult
+from ..core import outdir
+from ..core.errors import ArtgsError
+from ._job import WorkerOperator, figures_text, job_running
+from .capture import preview_cap
+
+
+def load_splat_preview(context: bpy.types.Context, path: Path) -> str:
+    """Replace the scene's splat preview with one of ``path``; returns the key figures."""
+    settings = context.scene.artgs
+    built = build_splat_preview(context, path, preview_cap(context))
+    old = settings.splat_object
+    if old is not None:
+        bpy.data.objects.remove(old)
+    settings.splat_object = built.obj
+    return f"{built.gaussians} Gaussians, preview {built.points} points ({built.seconds:.2f} s)"
+
+
+class ARTGS_OT_reconstruct(WorkerOperator, bpy.types.Operator):
+    """Reconstruct the static Gaussian splat from the capture (runs in the engine)"""
+
+    bl_idname = "artgs.reconstruct"
+    bl_label = "Reconstruct Splat"
+    bl_options = {"REGISTER", "UNDO"}
+    stage = "splat"
+    command = "reconstruct"
+
+    iterations: IntProperty(name="Iterations", default=0, min=0,
+                            description="Iteration cap (0: until converged)")
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        settings = getattr(context.scene, "artgs", None)
+        if settings is None or job_running() or settings.output_path is None:
+            return False
+        capture = settings.capture_path
+        return capture is not None and (capture / "transforms.json").is_file()
+
+    def worker_args(self, context: bpy.types.Context) -> list[str]:
+        settings = context.scene.artgs
+        args = [str(settings.output_path), "--capture", str(settings.capture_path),
+                "--device", preferences.get(context).device]
+        if self.iterations:
+            args += ["--iterations", str(self.iterations)]
+        return args
+
+    def finish(self, context: bpy.types.Context, result: WorkerResult) -> str:
+        preview = load_splat_preview(context, context.scene.artgs.output_path / outdir.SPLAT)
+        return figures_text(self._figures) or preview
+
+
+class ARTGS_OT_import_splat(bpy.types.Operator):
+    """Show a Gaussian splat PLY (default: the output folder's splat.ply) as a coloured point cloud"""
+
+    bl_idname = "artgs.import_splat"
+    bl_label = "Import Splat PLY"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filepath: StringProperty(name="PLY File", subtype="FILE_PATH", options={"SKIP_SAVE"},
+                             description="3DGS PLY to show (empty: OUT/splat.ply)")
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        settings = getattr(context.scene, "artgs", None)
+        out = settings.output_path if settings else None
+        return not job_running() and out is not None and (out / outdir.SPLAT).is_file()
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        settings = context.scene.artgs
+        path = Path(bpy.path.abspath(self.filepath)) if self.filepath else \
+            settings.output_path / outdir.SPLAT
+        try:
+            summary = load_splat_preview(context, path)
+        except (ArtgsError, OSError, ValueError) as exc:
+            settings.splat.set("FAILED", str(exc))
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        settings.splat.set("DONE", summary, 1.0)
+        self.report({"INFO"}, f"Splat preview: {summary}")
+        return {"FINISHED"}
+
+
+CLASSES = (ARTGS_OT_reconstruct, ARTGS_OT_import_splat)
