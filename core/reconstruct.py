@@ -1,9 +1,11 @@
 """Static reconstruction: a Gaussian splat from the capture's static RGB-D views -> OUT/splat.ply.
 
 1. Initialise from the back-projected masked depth of every training view, voxel-downsampled
-   (:func:`initial_splats`): colour from the pixels (SH DC), isotropic scale from the pixel
-   footprint (depth / focal), identity rotation, opacity 0.95.
-2. Optimise with Adam (per-parameter learning rates as in 3DGS, means' rate decaying) one random
+   (:func:`initial_splats`): colour from the pixels (SH DC), scale from the pixel footprint
+   (depth / focal), a disc in the surface where the depth normals agree (else isotropic),
+   opacity 0.95.
+2. Optimise with Adam (per-parameter learning rates like 3DGS but lower: the depth-initialised
+   splat is already close, and faster opacity/geometry rates made held-out depth drift), one random
    training view per step: ``L1 + 0.2 (1 - SSIM)`` of the render (black background) against the
    masked image, ``+ depth L1`` (alpha-normalised expected depth vs measured depth, where measured
    and inside the mask, relative to the object size), ``+ alpha L1`` against the mask (keeps the
@@ -56,6 +58,7 @@ class ReconstructConfig:
     init_opacity: float = 0.95
     voxel_pixels: float = 1.0           # init voxel = this many median pixel footprints
     init_scale: float = 0.3             # init standard deviation, in pixel footprints
+    init_flat: float = 0.1              # init thickness along the depth normal, x init_scale
     lr_means: float = 1.6e-5            # x object size, decaying to 1% of it
     lr_sh0: float = 2.5e-3
     lr_shN: float = 2.5e-3 / 20
@@ -114,15 +117,44 @@ def _render(params: dict[str, torch.Tensor], v: _View, backend: str):
 
 # --- initialisation ------------------------------------------------------------------------------
 
+def pixel_normals(frame: Frame) -> np.ndarray:
+    """World unit normals (H*W, 3) from the depth map by central differences, facing the camera;
+    zero where a neighbour has no depth or lies across a depth jump (> 10 % of the depth)."""
+    d = np.nan_to_num(frame.depth).astype(np.float64)
+    X = frame.camera.pixel_rays() * d[..., None]
+    out = np.zeros(d.shape + (3,))
+    n = np.cross(X[1:-1, 2:] - X[1:-1, :-2], X[2:, 1:-1] - X[:-2, 1:-1])
+    c = d[1:-1, 1:-1]
+    ok = c > 0
+    for nb in (d[1:-1, 2:], d[1:-1, :-2], d[2:, 1:-1], d[:-2, 1:-1]):
+        ok &= (nb > 0) & (np.abs(nb - c) < 0.1 * c)
+    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    n = np.where(ok[..., None] & (norm > 0), n / np.maximum(norm, 1e-30), 0.0)
+    n *= -np.sign(np.sum(n * X[1:-1, 1:-1], -1, keepdims=True))  # towards the camera
+    c2w = np.linalg.inv(frame.camera.w2c)
+    out[1:-1, 1:-1] = n @ c2w[:3, :3].T
+    return out.reshape(-1, 3)
+
+
+def normal_quats(normals: np.ndarray) -> np.ndarray:
+    """Quaternions (w x y z) rotating the local z axis onto unit ``normals`` (sign-free)."""
+    n = normals * np.where(normals[:, 2:3] < 0, -1.0, 1.0)
+    q = np.stack([1 + n[:, 2], -n[:, 1], n[:, 0], np.zeros(len(n))], 1)
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
 def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: float = 1.0,
-                   scale: float = 0.3, opacity: float = 0.95) -> tuple[SplatArrays, float]:
+                   scale: float = 0.3, flat: float = 0.1, opacity: float = 0.95
+                   ) -> tuple[SplatArrays, float]:
     """Gaussians from the frames' back-projected masked depth, voxel-downsampled.
 
     Returns the splat and the voxel size (metres) = ``voxel_pixels`` median pixel footprints
     (footprint = depth / focal). Each voxel's Gaussian sits at the mean of its points, with their
-    mean colour and an isotropic standard deviation of ``scale`` times their mean footprint.
+    mean colour and a standard deviation of ``scale`` times their mean footprint; where the
+    voxel's depth normals agree it is a disc in the surface (``flat`` times thinner along the
+    normal), elsewhere isotropic with identity rotation.
     """
-    pts, cols, foot = [], [], []
+    pts, cols, foot, nrm = [], [], [], []
     for f in frames:
         if f.depth is None:
             continue
@@ -131,6 +163,7 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
         pts.append(world)
         cols.append(f.rgb.reshape(-1, 3)[idx].astype(np.float64) / 255.0)
         foot.append(f.depth.reshape(-1)[idx].astype(np.float64) / focal)
+        nrm.append(pixel_normals(f)[idx])
     if not pts or sum(len(p) for p in pts) == 0:
         raise InputError("capture", "no masked depth pixels in the static views to start from",
                          field="depth_file_path")
@@ -141,19 +174,25 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
     key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
     _, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
 
-    def mean(a: np.ndarray) -> np.ndarray:
-        cols_ = [np.bincount(inv, weights=a[:, i]) for i in range(a.shape[1])]
-        return np.stack(cols_, -1) / counts[:, None]
+    def total(a: np.ndarray) -> np.ndarray:
+        return np.stack([np.bincount(inv, weights=a[:, i]) for i in range(a.shape[1])], -1)
 
     n = len(counts)
-    means, colour, sigma = mean(P), mean(C), scale * mean(S[:, None])[:, 0]
+    means, colour = total(P) / counts[:, None], total(C) / counts[:, None]
+    sigma = scale * total(S[:, None])[:, 0] / counts
+    normal = total(np.concatenate(nrm))
+    length = np.linalg.norm(normal, axis=1)
+    disc = length > 0.5 * counts  # normals present and agreeing
+    quats = np.tile(np.array([1.0, 0, 0, 0]), (n, 1))
+    quats[disc] = normal_quats(normal[disc] / length[disc, None])
+    log_scales = np.repeat(np.log(sigma)[:, None], 3, 1)
+    log_scales[disc, 2] += math.log(flat)
     k = (sh_degree + 1) ** 2
     sh = np.zeros((n, k, 3), np.float32)
     sh[:, 0] = rgb_to_sh0(torch.as_tensor(colour)).numpy()
     splats = SplatArrays(
-        means=means.astype(np.float32),
-        quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
-        log_scales=np.repeat(np.log(sigma)[:, None], 3, 1).astype(np.float32),
+        means=means.astype(np.float32), quats=quats.astype(np.float32),
+        log_scales=log_scales.astype(np.float32),
         opacity_logits=np.full(n, math.log(opacity / (1 - opacity)), np.float32),
         sh=sh)
     return splats, voxel
@@ -187,7 +226,8 @@ class Trainer:
         self.train_idx = list(train_idx)
         self.init, self.voxel = initial_splats(
             [frames[i] for i in train_idx], sh_degree=cfg.sh_degree,
-            voxel_pixels=cfg.voxel_pixels, scale=cfg.init_scale, opacity=cfg.init_opacity)
+            voxel_pixels=cfg.voxel_pixels, scale=cfg.init_scale, flat=cfg.init_flat,
+            opacity=cfg.init_opacity)
         self.views = [_view(i, frames[i], device) for i in train_idx]
         s = self.init
         self.size = float(np.linalg.norm(s.means.max(0) - s.means.min(0)))

@@ -15,6 +15,7 @@ from artgs.core.cli import main
 from artgs.core.errors import Cancelled, InputError
 from artgs.core.ply import read_ply
 from artgs.core.progress import QUIET, Progress
+from artgs.core.raster_project import quat_to_rotmat
 from artgs.core.reconstruct import (ReconstructConfig, Trainer, evaluate, holdout_indices,
                                     initial_splats, reconstruct, _view)
 from artgs.core.synth import generate_object
@@ -47,13 +48,18 @@ def test_initial_points_lie_on_the_depth_surface(capture):
     dist = box_distance(splats.means.astype(np.float64), boxes)
     # voxel means of surface points: on the surface except where a voxel straddles an edge
     assert np.median(dist) < 0.1 * voxel and np.quantile(dist, 0.9) < 0.5 * voxel
-    # colours come from the pixels; scales from the footprint; quaternions identity
+    # colours come from the pixels; scales from the footprint
     assert splats.sh.shape == (len(splats), 4, 3)
     rgb = 0.28209479177387814 * splats.sh[:, 0] + 0.5
     pix = np.concatenate([fr.rgb[fr.mask] for fr in frames]) / 255.0
     np.testing.assert_allclose(rgb.mean(0), pix.mean(0), atol=0.05)
-    np.testing.assert_array_equal(splats.quats, np.tile([1, 0, 0, 0], (len(splats), 1)))
     assert np.all(np.exp(splats.log_scales) < voxel)
+    # discs lie in the box faces: their normal (local z) is along one of the object's axes
+    disc = splats.log_scales[:, 2] < splats.log_scales[:, 0] - 1
+    assert disc.mean() > 0.7
+    normals = quat_to_rotmat(torch.as_tensor(splats.quats[disc]))[:, :, 2].numpy()
+    axes = random_spec(CATEGORY, SEED).base_pose[:3, :3]
+    assert np.mean(np.abs(normals @ axes).max(1) > 0.95) > 0.9
 
 
 def test_reconstruction_quality_and_output(capture, tmp_path):
