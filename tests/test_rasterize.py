@@ -81,6 +81,18 @@ def test_matches_reference(seed, degree):
     assert_match(result)
 
 
+def test_matches_reference_general_camera():
+    """A rotated and translated camera (w2c not the identity), non-square pixels."""
+    eye, target = np.array([0.7, -2.1, 0.9]), np.array([0.05, 0.1, 0.2])
+    cam = Camera(intrinsics(28.0, 33.0, 15.0, 12.5), look_at(eye, target), W, H)
+    params = random_scene(31, n=60, degree=2)
+    c2w_cv = torch.tensor(np.linalg.inv(cam.w2c))
+    params[0] = params[0] @ c2w_cv[:3, :3].T + c2w_cv[:3, 3]
+    result = render_both(params, w2c=cam.w2c, k=cam.K, weights_seed=31)
+    assert float(result["reference"][0].alpha.detach().max()) > 0.9
+    assert_match(result)
+
+
 def test_dense_scene_early_stop():
     """Many overlapping opaque Gaussians: most pixels stop early, alphas clamp at 0.99."""
     params = random_scene(7, n=120, degree=2)
@@ -189,6 +201,21 @@ def test_culled_gaussians_have_no_effect_and_zero_gradient():
         assert torch.equal(getattr(out, name), getattr(alone, name))
     for gr in grads:
         assert torch.isfinite(gr).all() and (gr[30:] == 0).all()
+
+
+def test_large_gaussians_beyond_the_view_edge():
+    """Centres outside 1.3x the field of view (the clamped-Jacobian path) reaching into the image."""
+    params = random_scene(17, n=24)
+    z = params[0][:, 2]
+    u = torch.linspace(-1, 1, 24, dtype=DT)
+    # x/z (or y/z) about 0.85 outside the image edge: beyond the clamp limit (0.67 / 0.62)
+    params[0] = torch.stack([torch.where(u > 0, 0.85, -0.85) * z * (u.abs() > 0.5),
+                             torch.where(u > 0, 0.8, -0.8) * z * (u.abs() <= 0.5), z], 1)
+    params[2] = torch.full_like(params[2], math.log(0.35)) + 0.2 * torch.randn(
+        24, 3, generator=torch.Generator().manual_seed(3), dtype=DT)
+    result = render_both(params, weights_seed=17)
+    assert float(result["reference"][0].alpha.detach().max()) > 0.3
+    assert_match(result)
 
 
 def test_degenerate_scales():
