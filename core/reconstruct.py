@@ -17,7 +17,9 @@ Held-out evaluation (``holdout`` = K evenly spaced static views, never trained o
 - PSNR of the object pixels: the render over a black background vs the captured image, MSE over
   the 3 channels of the pixels inside the mask (values in [0,1]), ``PSNR = -10 log10(MSE)``;
 - depth MAE: mean |rendered depth - measured depth| in mm over pixels inside the mask with a
-  valid measured depth (rendered depth is 0 where nothing was rendered; those count).
+  valid measured depth (rendered depth is 0 where nothing was rendered; those count), for the
+  rasterizer's depth (alpha-blended centre depths) and for the planar depth of
+  core/planar_depth.py (each Gaussian as a plane patch; no slant bias).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from .capture import Capture, Frame, load_capture
 from .densify import DensifyConfig, Densifier
 from .device import resolve_device
 from .errors import InputError
+from .planar_depth import planar_depth
 from .ply import SplatArrays, write_ply
 from .progress import Progress
 from .rasterize import rasterize
@@ -55,6 +58,7 @@ class ReconstructConfig:
     lambda_ssim: float = 0.2
     lambda_depth: float = 0.1           # weight of depth L1 measured in units of 1% of the object size
     lambda_alpha: float = 0.5
+    planar_depth_loss: bool = False     # depth loss on the planar depth (one more render/step)
     init_opacity: float = 0.95
     voxel_pixels: float = 1.0           # init voxel = this many median pixel footprints
     init_scale: float = 0.3             # init standard deviation, in pixel footprints
@@ -202,17 +206,22 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
 
 @torch.no_grad()
 def evaluate(params: dict[str, torch.Tensor], views: list[_View], backend: str) -> dict[str, float]:
-    """PSNR of the object pixels (dB) and depth MAE (mm) over ``views`` (see the module doc)."""
-    se, n_px, ae, n_d = 0.0, 0, 0.0, 0
+    """PSNR of the object pixels (dB), depth MAE (mm) of the rasterizer's depth and of the
+    planar depth (core/planar_depth.py) over ``views`` (see the module doc)."""
+    se, n_px, ae, ae_planar, n_d = 0.0, 0, 0.0, 0.0, 0
     for v in views:
         out = _render(params, v, backend)
         m = v.mask.bool()
         se += float(((out.rgb - v.rgb)[m] ** 2).sum())
         n_px += 3 * int(m.sum())
         ae += float((out.depth - v.depth)[v.depth_valid].abs().sum())
+        d = planar_depth(params["means"], params["quats"], params["log_scales"],
+                         params["opacity_logits"], v.K, v.w2c, v.width, v.height, backend)
+        ae_planar += float((d - v.depth)[v.depth_valid].abs().sum())
         n_d += int(v.depth_valid.sum())
     mse = se / max(n_px, 1)
-    return {"psnr": -10 * math.log10(max(mse, 1e-12)), "depth_mae_mm": 1000 * ae / max(n_d, 1)}
+    return {"psnr": -10 * math.log10(max(mse, 1e-12)), "depth_mae_mm": 1000 * ae / max(n_d, 1),
+            "planar_depth_mae_mm": 1000 * ae_planar / max(n_d, 1)}
 
 
 # --- optimisation --------------------------------------------------------------------------------
@@ -262,8 +271,11 @@ class Trainer:
         l1 = (r.rgb - v.rgb).abs().mean()
         loss = (1 - cfg.lambda_ssim) * l1 + cfg.lambda_ssim * (1 - ssim(r.rgb, v.rgb))
         if cfg.lambda_depth and v.depth_valid.any():
+            depth = r.depth if not cfg.planar_depth_loss else planar_depth(
+                p["means"], p["quats"], p["log_scales"], p["opacity_logits"], v.K, v.w2c,
+                v.width, v.height, self.backend)
             loss = loss + cfg.lambda_depth / self.depth_unit * \
-                (r.depth - v.depth)[v.depth_valid].abs().mean()
+                (depth - v.depth)[v.depth_valid].abs().mean()
         if cfg.lambda_alpha:
             loss = loss + cfg.lambda_alpha * (r.alpha - v.mask).abs().mean()
         self.opt.zero_grad()
@@ -350,7 +362,8 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
     }
     if held:
         ev = evaluate(trainer.params, [_view(i, static[i], dev) for i in held], backend)
-        figures.update(holdout_psnr=ev["psnr"], holdout_depth_mae_mm=ev["depth_mae_mm"])
+        figures.update(holdout_psnr=ev["psnr"], holdout_depth_mae_mm=ev["depth_mae_mm"],
+                       holdout_planar_depth_mae_mm=ev["planar_depth_mae_mm"])
     write_ply(Path(out) / outdir.SPLAT, result)
     figures["seconds"] = round(time.perf_counter() - t0, 2)
     return figures
