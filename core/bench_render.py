@@ -85,16 +85,17 @@ def blended_pairs(params, K, w2c, size) -> tuple[int, int]:
     return int(_count_pairs(feats, offsets, ids, size, size)), int(offsets[-1])
 
 
-def _time(fn, runs: int, warmup: int = 2) -> tuple[float, float]:
-    """(median, min) wall time of ``fn`` in ms."""
+def _time(fn, runs: int, warmup: int = 2) -> tuple[float, float, float]:
+    """(median wall, min wall, median process CPU time over all threads) of ``fn`` in ms."""
     for _ in range(warmup):
         fn()
-    times = []
+    wall, cpu = [], []
     for _ in range(runs):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times), 1e3 * min(times)
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return 1e3 * statistics.median(wall), 1e3 * min(wall), 1e3 * statistics.median(cpu)
 
 
 def _reference_memory(params, K, w2c, size) -> float:
@@ -111,8 +112,9 @@ def _reference_memory(params, K, w2c, size) -> float:
     return n_block_pairs * 256 * 12 * 4
 
 
-def bench_one(size: int, n: int, backend: str, runs: int, grad: bool) -> tuple[float, float]:
-    """(median, min) ms of the forward (grad=False) or forward+backward (grad=True) pass."""
+def bench_one(size: int, n: int, backend: str, runs: int, grad: bool
+              ) -> tuple[float, float, float]:
+    """``_time`` of the forward (grad=False) or forward+backward (grad=True) pass."""
     params, K, w2c = shell_scene(n, size)
     ps = [p.clone().requires_grad_(True) for p in params]
     g = torch.Generator().manual_seed(1)
@@ -135,9 +137,10 @@ def bench_render_command(args, progress) -> int:
     say = print if progress.mode == "text" else (lambda *a, **k: None)
     say(f"bench-render: shell scene, SH degree 0, threads torch={torch.get_num_threads()} "
         f"numba={numba.get_num_threads()}, median of {args.runs} runs after 2 warm-up runs")
-    say("times: median (min) ms; pairs/s from the medians")
+    say("wall times: median (min) ms; cpu: median process CPU ms (all threads; less sensitive "
+        "to a busy machine); pairs/s from the wall medians")
     say(f"{'size':>8} {'N':>7} {'pairs':>9} {'backend':>10} {'fwd ms':>15} {'fwd+bwd ms':>15} "
-        f"{'pairs/s fwd':>12} {'pairs/s f+b':>12}")
+        f"{'f+b cpu':>9} {'pairs/s fwd':>12} {'pairs/s f+b':>12}")
     results = []
     cases = [(s, n) for s in args.sizes for n in args.counts]
     for idx, (size, n) in enumerate(cases):
@@ -156,11 +159,13 @@ def bench_render_command(args, progress) -> int:
             results.append({"size": size, "n": n, "pairs": pairs, "backend": backend, "runs": runs,
                             "fwd_ms": round(fwd[0], 2), "fwd_min_ms": round(fwd[1], 2),
                             "fwd_bwd_ms": None if both is None else round(both[0], 2),
-                            "fwd_bwd_min_ms": None if both is None else round(both[1], 2)})
+                            "fwd_bwd_min_ms": None if both is None else round(both[1], 2),
+                            "fwd_bwd_cpu_ms": None if both is None else round(both[2], 2)})
             fwd_s = f"{fwd[0]:.1f} ({fwd[1]:.1f})"
             both_s = "-" if both is None else f"{both[0]:.1f} ({both[1]:.1f})"
+            cpu_s = "-" if both is None else f"{both[2]:.1f}"
             rate_b = "-" if both is None else f"{pairs / both[0] * 1e3:.3g}"
-            say(f"{size:>6}^2 {n:>7} {pairs:>9} {backend:>10} {fwd_s:>15} {both_s:>15} "
+            say(f"{size:>6}^2 {n:>7} {pairs:>9} {backend:>10} {fwd_s:>15} {both_s:>15} {cpu_s:>9} "
                 f"{pairs / fwd[0] * 1e3:>12.3g} {rate_b:>12}"
                 + (f"  [{runs} runs]" if runs != args.runs else "") + (f"  {note}" if note else ""))
     progress.finished(results=results)
