@@ -1,7 +1,7 @@
 """Splat preview: a point cloud of the Gaussians' centres, coloured by their SH DC term.
 
-Each point keeps the Gaussian's size (``radius``: geometric mean of the three scales, grown by
-the square root of the thinning when the preview is capped) and ``opacity`` (sigmoid of the logit).
+Each point keeps the Gaussian's size (``radius``: twice the geometric mean of the three scales,
+its 2-sigma extent, grown by the square root of the thinning when the preview is capped) and ``opacity`` (sigmoid of the logit).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def build_splat_preview(context: bpy.types.Context, path: str | Path, cap: int,
     keep = subsample(total, cap)
     sel = slice(None) if keep is None else keep
     thinning = 1.0 if keep is None else math.sqrt(total / len(keep))
-    radius = np.exp(splats.log_scales[sel].astype(np.float64).mean(axis=1)) * thinning
+    radius = 2.0 * np.exp(splats.log_scales[sel].astype(np.float64).mean(axis=1)) * thinning
     opacity = 1.0 / (1.0 + np.exp(-splats.opacity_logits[sel].astype(np.float64)))
     collection = collection or context.scene.collection
     name = f"{path.parent.name} splat" if path.parent.name else "splat"
