@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import bpy
 
 from ..artgs_addon import preferences
@@ -35,15 +37,21 @@ class ARTGS_OT_import_capture(bpy.types.Operator):
         try:
             capture = load_capture(settings.capture_path)
         except (ArtgsError, OSError) as exc:
-            state.set("FAILED", str(exc))
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+            return self._fail(state, str(exc))
+        except ImportError as exc:  # Blender's own Python has no OpenCV to decode the images
+            return self._fail(state, f"reading the capture needs {exc.name or exc} in Blender's "
+                              f"Python: {sys.executable} -m pip install opencv-python-headless")
         built = build_capture(context, capture, preview_cap(context))
         summary = (f"{len(built.cameras)} cameras, {built.points_kept} of {built.points_total} "
                    f"points ({built.build_seconds:.2f} s)")
         state.set("DONE", summary, 1.0)
         self.report({"INFO"}, f"Imported {built.collection.name}: {summary}")
         return {"FINISHED"}
+
+    def _fail(self, state, message: str) -> set[str]:
+        state.set("FAILED", message)
+        self.report({"ERROR"}, message)
+        return {"CANCELLED"}
 
 
 CLASSES = (ARTGS_OT_import_capture,)
