@@ -266,10 +266,12 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
             buf[g, 9] += s_d
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True)
 def sum_thread_grads(grads, order, out):
-    """out[order[m]] = sum over threads of grads[:, m] (rows of ``out`` not in order untouched)."""
-    for m in prange(grads.shape[1]):
+    """out[order[m]] = sum over threads of grads[:, m] (rows of ``out`` not in order untouched).
+
+    Serial: it is cheap, and a parallel region costs more than it saves on a busy machine."""
+    for m in range(grads.shape[1]):
         for f in range(grads.shape[2]):
             s = _ZERO
             for t in range(grads.shape[0]):
