@@ -11,6 +11,7 @@ depth and alpha. Pairs = Gaussian-pixel pairs actually blended.
 from __future__ import annotations
 
 import math
+import os
 import statistics
 import time
 
@@ -136,7 +137,8 @@ def bench_render_command(args, progress) -> int:
     numba.set_num_threads(min(THREADS, numba.config.NUMBA_NUM_THREADS))
     say = print if progress.mode == "text" else (lambda *a, **k: None)
     say(f"bench-render: shell scene, SH degree 0, threads torch={torch.get_num_threads()} "
-        f"numba={numba.get_num_threads()}, median of {args.runs} runs after 2 warm-up runs")
+        f"numba={numba.get_num_threads()}, median of {args.runs} runs after 2 warm-up runs; "
+        f"machine load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     say("wall times: median (min) ms; cpu: median process CPU ms (all threads; less sensitive "
         "to a busy machine); pairs/s from the wall medians")
     say(f"{'size':>8} {'N':>7} {'pairs':>9} {'backend':>10} {'fwd ms':>15} {'fwd+bwd ms':>15} "
@@ -168,5 +170,5 @@ def bench_render_command(args, progress) -> int:
             say(f"{size:>6}^2 {n:>7} {pairs:>9} {backend:>10} {fwd_s:>15} {both_s:>15} {cpu_s:>9} "
                 f"{pairs / fwd[0] * 1e3:>12.3g} {rate_b:>12}"
                 + (f"  [{runs} runs]" if runs != args.runs else "") + (f"  {note}" if note else ""))
-    progress.finished(results=results)
+    progress.finished(results=results, load_average=os.getloadavg()[0])
     return 0
