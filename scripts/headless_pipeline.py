@@ -92,11 +92,10 @@ def render_preview(scene: bpy.types.Scene, path: Path, width: int) -> None:
     bpy.ops.render.render(write_still=True)
 
 
-def main(argv: list[str]) -> int:
-    args = parse_args(argv)
+def run(args: argparse.Namespace, module: str) -> None:
+    """Import, reconstruct, propose; save OUT/scene.blend and OUT/preview.png."""
     capture, out = args.capture.resolve(), args.out.resolve()
     out.mkdir(parents=True, exist_ok=True)
-    module = enable_addon()
     clear_scene()
     scene = bpy.context.scene
     settings = scene.artgs
@@ -110,7 +109,7 @@ def main(argv: list[str]) -> int:
     run_stage("propose bones", bpy.ops.artgs.propose_bones)
     for stage in ("capture", "splat", "bones"):
         print(f"  {stage}: {settings.stage(stage).text}")
-    # Render from the first capture camera, but only the splat preview and the bones.
+    # Render from the first capture camera, showing the splat preview (not the capture's points).
     capture_points = [o for o in scene.objects if o.type == "MESH" and o != settings.splat_object]
     for obj in capture_points:
         obj.hide_render = True
@@ -120,6 +119,17 @@ def main(argv: list[str]) -> int:
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "scene.blend"))
     print(f"preview: {out / 'preview.png'}")
     print(f"scene: {out / 'scene.blend'}")
+
+
+def main(argv: list[str]) -> int:
+    args = parse_args(argv)
+    module = enable_addon()
+    try:
+        run(args, module)
+    finally:
+        if not bpy.app.binary_path:
+            # bpy as a module can hang at exit while Python-defined property groups are registered.
+            addon_utils.disable(module, default_set=False, handle_error=None)
     return 0
 
 

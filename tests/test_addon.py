@@ -1,0 +1,298 @@
+"""The add-on in bpy (background): registration, preferences, polls, Import Capture (cameras
+reproduce K, point count), Import Splat (count, colours), engine failures leave the scene as it was.
+
+The whole pipeline through the operators runs in tests/test_addon_pipeline.py (a subprocess).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+import addon_utils  # noqa: E402
+
+from artgs.artgs_addon import preferences  # noqa: E402
+from artgs.artgs_addon.capture_scene import camera_object, pixel_aspect  # noqa: E402
+from artgs.artgs_addon.pointcloud import srgb_to_linear  # noqa: E402
+from artgs.artgs_addon.splat_preview import SH_C0  # noqa: E402
+from artgs.core.cameras import Camera, intrinsics, look_at  # noqa: E402
+from artgs.core.capture import load_capture  # noqa: E402
+from artgs.core.ply import SplatArrays, write_ply  # noqa: E402
+from artgs.core.synth import generate_object  # noqa: E402
+from artgs.operators.propose import ARTGS_OT_propose_bones  # noqa: E402
+
+ADDON = "artgs"
+
+
+def _leftovers() -> list[str]:
+    names = [n for n in dir(bpy.types) if n.upper().startswith("ARTGS")]
+    for owner, prop in ((bpy.types.Scene, "artgs"), (bpy.types.Bone, "artgs_joint"),
+                        (bpy.types.EditBone, "artgs_joint")):
+        if hasattr(owner, prop):
+            names.append(f"{owner.__name__}.{prop}")
+    names += [f"bpy.ops.artgs.{op}" for op in dir(bpy.ops.artgs)]
+    return names
+
+
+def _handlers() -> dict[str, int]:
+    return {name: len(getattr(bpy.app.handlers, name)) for name in dir(bpy.app.handlers)
+            if isinstance(getattr(bpy.app.handlers, name), list)}
+
+
+def _enable() -> None:
+    assert addon_utils.enable(ADDON, default_set=True, handle_error=None) is not None
+
+
+def _disable() -> None:
+    addon_utils.disable(ADDON, default_set=True, handle_error=None)
+
+
+def test_register_unregister_twice_leaves_nothing():
+    handlers = _handlers()
+    for _ in range(2):
+        _enable()
+        assert hasattr(bpy.types.Scene, "artgs") and hasattr(bpy.types.Bone, "artgs_joint")
+        assert "bpy.ops.artgs.import_capture" in _leftovers()
+        for name in ("ARTGS_PT_pipeline", "ARTGS_PT_capture", "ARTGS_PT_splat", "ARTGS_PT_bones",
+                     "ARTGS_PT_optimise", "ARTGS_PT_export", "ARTGS_OT_import_capture",
+                     "ARTGS_OT_reconstruct", "ARTGS_OT_import_splat", "ARTGS_OT_propose_bones",
+                     "ARTGS_OT_check_engine"):
+            assert hasattr(bpy.types, name), name
+        assert bpy.types.ARTGS_PT_capture.bl_parent_id == "ARTGS_PT_pipeline"
+        assert bpy.types.ARTGS_PT_pipeline.bl_category == "ArtGS"
+        _disable()
+        assert _leftovers() == []
+        assert _handlers() == handlers
+
+
+@pytest.fixture(scope="module")
+def addon():
+    """The add-on enabled through addon_utils (so its preferences exist); always disabled after
+    (bpy as a module hangs at exit while Python-defined property groups are registered)."""
+    _enable()
+    try:
+        yield
+    finally:
+        _disable()
+
+
+@pytest.fixture
+def scene(addon):
+    bpy.ops.wm.read_homefile(use_empty=True)
+    prefs = preferences.get()
+    prefs.engine_python, prefs.preview_cap, prefs.vlm_api_key = "", 200_000, ""
+    return bpy.context.scene
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    return generate_object(tmp_path_factory.mktemp("cap") / "cabinet", "cabinet", 0, width=64,
+                           height=48, static_views=4, steps=2)
+
+
+def _blender_K(obj, width: int, height: int, aspect: tuple[float, float]) -> np.ndarray:
+    """Intrinsics from Blender's own projection matrix of camera ``obj``."""
+    P = np.array(obj.calc_matrix_camera(bpy.context.evaluated_depsgraph_get(), x=width, y=height,
+                                        scale_x=aspect[0], scale_y=aspect[1]))
+    return np.array([[width / 2 * P[0, 0], 0, width / 2 * (1 - P[0, 2])],
+                     [0, height / 2 * P[1, 1], height / 2 * (1 + P[1, 2])], [0, 0, 1]])
+
+
+def test_preferences_defaults_and_engine(scene):
+    prefs = preferences.get()
+    assert prefs.bl_rna.properties["vlm_api_key"].subtype == "PASSWORD"
+    assert prefs.preview_cap == 200_000 and prefs.device == "auto"
+    # The checkout's .venv (where this test runs) is the default engine.
+    assert preferences.engine_python() == preferences.default_engine()
+    assert preferences.default_engine().endswith(("python", "python.exe"))
+
+
+def test_api_key_never_in_blend_or_argv(scene, tmp_path, capture):
+    secret = "sk-test-5ecret-abc123"
+    prefs = preferences.get()
+    prefs.vlm_api_key, prefs.vlm_endpoint = secret, "http://127.0.0.1:9/v1"
+    settings = scene.artgs
+    settings.capture_dir, settings.output_dir = str(capture), str(tmp_path / "out")
+    settings.proposal_method = "vlm"
+    args = ARTGS_OT_propose_bones.worker_args(None, bpy.context)
+    assert secret not in " ".join(args) and "http://127.0.0.1:9/v1" in args
+    assert ARTGS_OT_propose_bones.worker_env(None, bpy.context) == {"ARTGS_VLM_API_KEY": secret}
+    path = tmp_path / "scene.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=False)
+    data = path.read_bytes()
+    assert secret.encode() not in data and b"http://127.0.0.1:9/v1" not in data
+
+
+def test_polls_need_their_inputs(scene, tmp_path, capture):
+    ops = bpy.ops.artgs
+    assert not ops.import_capture.poll() and not ops.reconstruct.poll()
+    assert not ops.import_splat.poll() and not ops.propose_bones.poll()
+    scene.artgs.capture_dir = str(tmp_path)  # a folder without transforms.json
+    scene.artgs.output_dir = str(tmp_path / "out")
+    assert not ops.import_capture.poll() and not ops.reconstruct.poll()
+    scene.artgs.capture_dir = str(capture)
+    assert ops.import_capture.poll() and ops.reconstruct.poll() and ops.propose_bones.poll()
+    assert not ops.import_splat.poll()
+    write_ply(tmp_path / "out" / "splat.ply", _splats(10))
+    assert ops.import_splat.poll()
+
+
+def test_import_capture_cameras_and_points(scene, capture):
+    scene.artgs.capture_dir = str(capture)
+    assert bpy.ops.artgs.import_capture() == {"FINISHED"}
+    cap = load_capture(capture)
+    collection = bpy.data.collections[capture.name]
+    cams = [o for o in collection.objects if o.type == "CAMERA"]
+    interaction_cams = {tuple(np.round(f.camera.c2w, 6).ravel()) for f in cap.interaction}
+    assert len(cams) == len(cap.static) + len(interaction_cams)
+    render = scene.render
+    assert (render.resolution_x, render.resolution_y) == (64, 48)
+    aspect = (render.pixel_aspect_x, render.pixel_aspect_y)
+    by_name = {o["artgs_frame"]: o for o in cams}
+    for f in cap.static:
+        obj = by_name[f.file_path]
+        np.testing.assert_allclose(np.array(obj.matrix_world), f.camera.c2w, atol=1e-5)
+        np.testing.assert_allclose(_blender_K(obj, 64, 48, aspect), f.camera.K, rtol=1e-6,
+                                   atol=1e-6 * 64)
+    points = [o for o in collection.objects if o.type == "MESH"]
+    assert len(points) == 1
+    expected = sum(int(np.count_nonzero((f.depth > 0) & f.mask)) for f in cap.static)
+    assert len(points[0].data.vertices) == expected
+    assert scene.artgs.capture.status == "DONE"
+    assert f"{len(cams)} cameras, {expected} of {expected} points" in scene.artgs.capture.message
+
+
+@pytest.mark.parametrize("K,size", [
+    (intrinsics(100.0, 90.0, 33.3, 41.7), (80, 60)),    # fl_y < fl_x, off-centre
+    (intrinsics(80.0, 95.0, 20.2, 70.1), (64, 96)),     # portrait, fl_y > fl_x
+    (intrinsics(500.0, 500.0, 320.0, 240.0), (640, 480)),
+])
+def test_camera_intrinsics_reproduce_K(scene, K, size):
+    w, h = size
+    obj = camera_object("cam", Camera(K, look_at([1, 2, 3], [0, 0, 0]), w, h), scene.collection)
+    np.testing.assert_allclose(_blender_K(obj, w, h, pixel_aspect(K)), K, rtol=1e-6, atol=1e-6 * w)
+
+
+def test_import_capture_cap_is_deterministic_subset(scene, capture):
+    prefs = preferences.get()
+    prefs.preview_cap = 1000
+    scene.artgs.capture_dir = str(capture)
+    scene.artgs.preview_density = 0.5
+    coords = []
+    for _ in range(2):
+        bpy.ops.artgs.import_capture()
+        mesh = [o for o in bpy.data.collections[-1].objects if o.type == "MESH"][0].data
+        co = np.empty(3 * len(mesh.vertices), np.float32)
+        mesh.vertices.foreach_get("co", co)
+        coords.append(co)
+    assert len(coords[0]) == 3 * 500
+    np.testing.assert_array_equal(coords[0], coords[1])
+
+
+def _splats(n: int, seed: int = 0) -> SplatArrays:
+    rng = np.random.default_rng(seed)
+    sh = np.zeros((n, 4, 3), np.float32)
+    sh[:, 0] = rng.normal(0, 1.0, (n, 3))  # some colours beyond 0..1: clipped
+    return SplatArrays(rng.normal(size=(n, 3)).astype(np.float32),
+                       rng.normal(size=(n, 4)).astype(np.float32),
+                       np.log(rng.uniform(0.01, 0.05, (n, 3))).astype(np.float32),
+                       rng.normal(size=n).astype(np.float32), sh)
+
+
+def _attribute(mesh, name: str, width: int) -> np.ndarray:
+    attr = mesh.attributes[name]
+    values = np.empty(width * len(attr.data), np.float32)
+    attr.data.foreach_get("color" if width == 4 else "value", values)
+    return values.reshape(-1, width) if width > 1 else values
+
+
+def test_import_splat_points_and_colours(scene, tmp_path):
+    splats = _splats(2000)
+    out = tmp_path / "out"
+    write_ply(out / "splat.ply", splats)
+    scene.artgs.output_dir = str(out)
+    assert bpy.ops.artgs.import_splat() == {"FINISHED"}
+    obj = scene.artgs.splat_object
+    mesh = obj.data
+    assert len(mesh.vertices) == 2000 and obj["artgs_gaussians"] == 2000
+    co = np.empty(3 * 2000, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    np.testing.assert_allclose(co.reshape(-1, 3), splats.means, atol=1e-6)
+    srgb = np.clip(0.5 + 0.28209479177387814 * splats.sh[:, 0], 0, 1)
+    np.testing.assert_allclose(_attribute(mesh, "Col", 4)[:, :3], srgb_to_linear(srgb), atol=1e-5)
+    radius = 2 * np.exp(splats.log_scales.mean(axis=1))
+    np.testing.assert_allclose(_attribute(mesh, "radius", 1), radius, rtol=1e-5)
+    assert scene.artgs.splat.status == "DONE" and "2000 Gaussians" in scene.artgs.splat.message
+
+    # Capped: a deterministic subset of the same Gaussians; the old preview is replaced.
+    preferences.get().preview_cap, scene.artgs.preview_density = 1000, 0.3
+    assert bpy.ops.artgs.import_splat() == {"FINISHED"}
+    assert len([o for o in bpy.data.objects if o.type == "MESH"]) == 1
+    mesh = scene.artgs.splat_object.data
+    assert len(mesh.vertices) == 300
+    co = np.empty(900, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    rows = {tuple(r) for r in np.round(splats.means, 5)}
+    assert all(tuple(r) in rows for r in np.round(co.reshape(-1, 3), 5))
+
+
+def test_sh_constant_matches_the_engine():
+    from artgs.core.sh import C0
+
+    assert SH_C0 == pytest.approx(C0, abs=1e-15)
+
+
+def _scene_state() -> tuple:
+    return (sorted(o.name for o in bpy.data.objects), sorted(c.name for c in bpy.data.collections),
+            len(bpy.data.meshes))
+
+
+def test_engine_failure_reports_and_leaves_scene(scene, tmp_path, capture):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "transforms.json").write_text(json.dumps({"fl_x": 50, "frames": []}))
+    scene.artgs.capture_dir, scene.artgs.output_dir = str(capture), str(tmp_path / "out")
+    bpy.ops.artgs.import_capture()
+    scene.artgs.capture_dir = str(bad)
+    before = _scene_state()
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.artgs.reconstruct(iterations=2)
+    message = scene.artgs.splat.message
+    assert scene.artgs.splat.status == "FAILED" and str(bad / "transforms.json") in message
+    assert message in str(err.value) and "Traceback" not in str(err.value)
+    assert scene.artgs.splat.text == f"failed: {message}"
+    assert _scene_state() == before and scene.artgs.splat_object is None
+
+
+def test_failing_capture_import_leaves_scene(scene, tmp_path):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "transforms.json").write_text("{not json")
+    scene.artgs.capture_dir = str(bad)
+    before = _scene_state()
+    with pytest.raises(RuntimeError, match="transforms.json"):
+        bpy.ops.artgs.import_capture()
+    assert scene.artgs.capture.status == "FAILED" and _scene_state() == before
+
+
+def test_vlm_refused_without_online_access(scene, tmp_path, capture):
+    assert not bpy.app.online_access  # bpy as a module runs offline
+    preferences.get().vlm_endpoint = "http://127.0.0.1:9/v1"
+    scene.artgs.capture_dir, scene.artgs.output_dir = str(capture), str(tmp_path / "out")
+    scene.artgs.proposal_method = "vlm"
+    before = _scene_state()
+    with pytest.raises(RuntimeError, match="Allow Online Access"):
+        bpy.ops.artgs.propose_bones()
+    assert scene.artgs.bones.status == "FAILED" and "Motion" in scene.artgs.bones.message
+    assert _scene_state() == before and not (tmp_path / "out").exists()
+
+
+def test_wrong_engine_fails_cleanly(scene, tmp_path, capture):
+    preferences.get().engine_python = str(tmp_path / "no-python")
+    scene.artgs.capture_dir, scene.artgs.output_dir = str(capture), str(tmp_path / "out")
+    with pytest.raises(RuntimeError, match="Engine Python"):
+        bpy.ops.artgs.reconstruct()
+    assert scene.artgs.splat.status == "FAILED"
