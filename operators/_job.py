@@ -159,7 +159,7 @@ class WorkerOperator:
             self._worker.wait()
             self._end_modal(context)
             return self._complete(context)
-        if event.type == "TIMER" and event.timer is self._timer:
+        if event.type == "TIMER":  # ours or another: polling is cheap
             self._on_events(context, self._worker.poll())
             if not self._worker.running:
                 self._on_events(context, self._worker.poll())

@@ -55,7 +55,8 @@ def test_zip_contents(built, manifest):
         assert required in names, required
     assert not [n for n in names if n.startswith(("tests/", ".venv/", ".ci/", ".git/", "dist/"))
                 or "__pycache__" in n or n.endswith(".pyc") or ".egg-info" in n
-                or n in ("scripts/demo.py", "scripts/build_extension.py", "Makefile")]
+                or n in ("scripts/demo.py", "scripts/build_extension.py", "scripts/bench_preview.py",
+                      "Makefile")]
 
 
 _INSTALL = """
