@@ -7,6 +7,7 @@ The whole pipeline through the operators runs in tests/test_addon_pipeline.py (a
 from __future__ import annotations
 
 import json
+import sys
 
 import numpy as np
 import pytest
@@ -296,3 +297,17 @@ def test_wrong_engine_fails_cleanly(scene, tmp_path, capture):
     with pytest.raises(RuntimeError, match="Engine Python"):
         bpy.ops.artgs.reconstruct()
     assert scene.artgs.splat.status == "FAILED"
+
+
+def test_check_engine_reports_what_it_found(scene, tmp_path):
+    assert bpy.ops.artgs.check_engine() == {"FINISHED"}
+    found = [line for line in preferences.last_check if line.startswith("Found: ")]
+    assert found and "numpy " in found[0] and "torch " in found[0]
+    # An interpreter without the engine: the error names it and stays in the preferences.
+    engine = tmp_path / "python-no-site"
+    engine.write_text(f'#!/bin/sh\nexec "{sys.executable}" -S "$@"\n')
+    engine.chmod(0o755)
+    preferences.get().engine_python = str(engine)
+    with pytest.raises(RuntimeError, match="No module named artgs"):
+        bpy.ops.artgs.check_engine()
+    assert str(engine) in preferences.last_check[-1]
