@@ -34,13 +34,14 @@ class DensifyConfig:
 class Densifier:
     """Accumulates view-space gradients per Gaussian and applies clone/split/prune."""
 
-    def __init__(self, n: int, config: DensifyConfig) -> None:
+    def __init__(self, n: int, config: DensifyConfig, device: torch.device | str = "cpu") -> None:
         self.config = config
+        self.device = device
         self._reset(n)
 
     def _reset(self, n: int) -> None:
-        self.grad_sum = torch.zeros(n)
-        self.count = torch.zeros(n)
+        self.grad_sum = torch.zeros(n, device=self.device)
+        self.count = torch.zeros(n, device=self.device)
 
     @torch.no_grad()
     def accumulate(self, means: torch.Tensor, grad: torch.Tensor, w2c: torch.Tensor,

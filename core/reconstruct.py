@@ -6,8 +6,8 @@
    opacity 0.95.
 2. Optimise with Adam (per-parameter learning rates like 3DGS but lower: the depth-initialised
    splat is already close, and faster opacity/geometry rates made held-out depth drift), one random
-   training view per step: ``L1 + 0.2 (1 - SSIM)`` of the render (black background) against the
-   masked image, ``+ depth L1`` (alpha-normalised expected depth vs measured depth, where measured
+   training view per step: ``0.8 L1 + 0.2 (1 - SSIM)`` of the render (black background) against
+   the masked image (L1 summed over the image, divided by the object pixels), ``+ depth L1`` (alpha-normalised expected depth vs measured depth, where measured
    and inside the mask, relative to the object size), ``+ alpha L1`` against the mask (keeps the
    background empty); densify (clone/split on view-space gradient) and prune (core/densify.py).
 3. Stop when the training loss plateaus (relative drop over a window below a tolerance) or at
@@ -88,7 +88,7 @@ def holdout_indices(n: int, k: int) -> list[int]:
 
 
 @dataclass
-class _View:
+class View:
     """One static view as tensors."""
 
     index: int              # position in capture.static
@@ -100,20 +100,23 @@ class _View:
     mask: torch.Tensor      # (H,W) float 0/1
     depth: torch.Tensor     # (H,W) metres, 0 = no measurement
     depth_valid: torch.Tensor  # (H,W) bool: measured and inside the mask
+    pixels: int             # object pixels (at least 1)
 
 
-def _view(index: int, f: Frame, device: torch.device) -> _View:
+def make_view(index: int, f: Frame, device: torch.device) -> View:
+    """Frame ``f`` (static view number ``index``) as tensors on ``device``."""
     def t(a: np.ndarray) -> torch.Tensor:
         return torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32, device=device)
     h, w = f.rgb.shape[:2]
     mask = np.ones((h, w), bool) if f.mask is None else f.mask.astype(bool)
     depth = np.zeros((h, w), np.float32) if f.depth is None else np.nan_to_num(f.depth)
     rgb = f.rgb.astype(np.float32) / 255.0 * mask[..., None]
-    return _View(index, t(f.camera.K), t(f.camera.w2c), w, h, t(rgb), t(mask), t(depth),
-                 torch.as_tensor(mask & (depth > 0), device=device))
+    return View(index, t(f.camera.K), t(f.camera.w2c), w, h, t(rgb), t(mask), t(depth),
+                 torch.as_tensor(mask & (depth > 0), device=device), max(int(mask.sum()), 1))
 
 
-def _render(params: dict[str, torch.Tensor], v: _View, backend: str):
+def render_params(params: dict[str, torch.Tensor], v: View, backend: str = "auto"):
+    """Render the optimiser's parameters (``sh0``/``shN`` split) in view ``v``."""
     return rasterize(params["means"], params["quats"], params["log_scales"],
                      params["opacity_logits"], torch.cat([params["sh0"], params["shN"]], 1),
                      v.K, v.w2c, v.width, v.height, None, backend)
@@ -205,12 +208,12 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
 # --- evaluation ----------------------------------------------------------------------------------
 
 @torch.no_grad()
-def evaluate(params: dict[str, torch.Tensor], views: list[_View], backend: str) -> dict[str, float]:
+def evaluate(params: dict[str, torch.Tensor], views: list[View], backend: str) -> dict[str, float]:
     """PSNR of the object pixels (dB), depth MAE (mm) of the rasterizer's depth and of the
     planar depth (core/planar_depth.py) over ``views`` (see the module doc)."""
     se, n_px, ae, ae_planar, n_d = 0.0, 0, 0.0, 0.0, 0
     for v in views:
-        out = _render(params, v, backend)
+        out = render_params(params, v, backend)
         m = v.mask.bool()
         se += float(((out.rgb - v.rgb)[m] ** 2).sum())
         n_px += 3 * int(m.sum())
@@ -237,7 +240,7 @@ class Trainer:
             [frames[i] for i in train_idx], sh_degree=cfg.sh_degree,
             voxel_pixels=cfg.voxel_pixels, scale=cfg.init_scale, flat=cfg.init_flat,
             opacity=cfg.init_opacity)
-        self.views = [_view(i, frames[i], device) for i in train_idx]
+        self.views = [make_view(i, frames[i], device) for i in train_idx]
         s = self.init
         self.size = float(np.linalg.norm(s.means.max(0) - s.means.min(0)))
         params = {"means": s.means, "quats": s.quats, "log_scales": s.log_scales,
@@ -247,7 +250,7 @@ class Trainer:
                     "sh0": cfg.lr_sh0, "shN": cfg.lr_shN}
         self.opt = Adam({k: torch.as_tensor(v, device=device) for k, v in params.items()},
                         self.lrs)
-        self.densifier = Densifier(len(s), cfg.densify)
+        self.densifier = Densifier(len(s), cfg.densify, device)
         self.depth_unit = 0.01 * self.size
         self.rng = np.random.default_rng(cfg.seed)
         self.order: list[int] = []
@@ -257,7 +260,7 @@ class Trainer:
     def params(self) -> dict[str, torch.Tensor]:
         return self.opt.params
 
-    def step(self) -> tuple[torch.Tensor, Any, _View]:
+    def step(self) -> tuple[torch.Tensor, Any, View]:
         """One iteration on the next training view; returns (loss, render, view)."""
         cfg = self.cfg
         self.it += 1
@@ -267,8 +270,8 @@ class Trainer:
         v = self.views[self.order.pop()]
         self.opt.lrs["means"] = self.lrs["means"] * 0.01 ** min(it / self.cap, 1.0)
         p = self.opt.params
-        r = _render(p, v, self.backend)
-        l1 = (r.rgb - v.rgb).abs().mean()
+        r = render_params(p, v, self.backend)
+        l1 = (r.rgb - v.rgb).abs().sum() / (3 * v.pixels)  # per object pixel
         loss = (1 - cfg.lambda_ssim) * l1 + cfg.lambda_ssim * (1 - ssim(r.rgb, v.rgb))
         if cfg.lambda_depth and v.depth_valid.any():
             depth = r.depth if not cfg.planar_depth_loss else planar_depth(
@@ -361,7 +364,7 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
         "holdout_views": [static[i].index for i in held],
     }
     if held:
-        ev = evaluate(trainer.params, [_view(i, static[i], dev) for i in held], backend)
+        ev = evaluate(trainer.params, [make_view(i, static[i], dev) for i in held], backend)
         figures.update(holdout_psnr=ev["psnr"], holdout_depth_mae_mm=ev["depth_mae_mm"],
                        holdout_planar_depth_mae_mm=ev["planar_depth_mae_mm"])
     write_ply(Path(out) / outdir.SPLAT, result)

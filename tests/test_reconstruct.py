@@ -17,7 +17,7 @@ from artgs.core.ply import read_ply
 from artgs.core.progress import QUIET, Progress
 from artgs.core.raster_project import quat_to_rotmat
 from artgs.core.reconstruct import (ReconstructConfig, Trainer, evaluate, holdout_indices,
-                                    initial_splats, reconstruct, _view)
+                                    initial_splats, make_view, reconstruct)
 from artgs.core.synth import generate_object
 from artgs.core.synth_objects import box_distance, random_spec
 
@@ -75,7 +75,7 @@ def test_reconstruction_quality_and_output(capture, tmp_path):
               "opacity_logits": splat.opacity_logits, "sh0": splat.sh[:, :1],
               "shN": splat.sh[:, 1:]}
     params = {k: torch.as_tensor(v) for k, v in params.items()}
-    views = [_view(i, capture.static[i], torch.device("cpu")) for i in (2, 7)]
+    views = [make_view(i, capture.static[i], torch.device("cpu")) for i in (2, 7)]
     ev = evaluate(params, views, "auto")
     assert ev["psnr"] == pytest.approx(fig["holdout_psnr"], abs=1e-3)
 
