@@ -72,20 +72,34 @@ def _interaction_cameras(frames: list[Frame]) -> list[Frame]:
     return seen
 
 
-def capture_points(capture: Capture) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Static frames' depth back-projected: world points (N,3), sRGB colours (N,3) in 0..1, and
-    each point's pixel footprint radius (N,) in metres."""
+def capture_points(capture: Capture, cap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Static frames' depth back-projected, at most ``cap`` points (a deterministic random subset,
+    chosen before back-projecting so memory stays bounded): world points (N,3), sRGB colours (N,3)
+    in 0..1, radius (N,) metres (half a pixel's footprint, grown by the square root of the
+    thinning), and the number of points available before the cap."""
+    frames = [f for f in capture.static if f.depth is not None]
+    valid = []
+    for f in frames:
+        ok = np.isfinite(f.depth) & (f.depth > 0)
+        valid.append(np.flatnonzero(ok if f.mask is None else ok & f.mask))
+    counts = np.array([len(v) for v in valid], dtype=np.int64)
+    total = int(counts.sum())
+    keep = subsample(total, cap)
+    thinning = 1.0 if keep is None else float(np.sqrt(total / max(len(keep), 1)))
+    starts = np.concatenate([[0], np.cumsum(counts)])
     pts, cols, rads = [], [], []
-    for f in capture.static:
-        if f.depth is None:
-            continue
-        world, idx = f.camera.backproject(f.depth, f.mask)
+    for k, f in enumerate(frames):
+        chosen = valid[k] if keep is None else \
+            valid[k][keep[(keep >= starts[k]) & (keep < starts[k + 1])] - starts[k]]
+        selected = np.zeros(f.depth.size, bool)
+        selected[chosen] = True
+        world, idx = f.camera.backproject(f.depth, selected.reshape(f.depth.shape))
         pts.append(world)
         cols.append(f.rgb.reshape(-1, 3)[idx].astype(np.float32) / 255.0)
-        rads.append(0.5 * f.depth.reshape(-1)[idx] / float(f.camera.K[0, 0]))
+        rads.append(thinning * 0.5 * f.depth.reshape(-1)[idx] / float(f.camera.K[0, 0]))
     if not pts:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.float32), np.zeros(0, np.float32)
-    return np.concatenate(pts), np.concatenate(cols), np.concatenate(rads)
+        return np.zeros((0, 3)), np.zeros((0, 3), np.float32), np.zeros(0, np.float32), 0
+    return np.concatenate(pts), np.concatenate(cols), np.concatenate(rads), total
 
 
 def build_capture(context: bpy.types.Context, capture: Capture, cap: int) -> CaptureScene:
@@ -110,13 +124,7 @@ def build_capture(context: bpy.types.Context, capture: Capture, cap: int) -> Cap
     context.scene.camera = cameras[0]
 
     t0 = time.perf_counter()
-    points, colors, radius = capture_points(capture)
-    total = len(points)
-    keep = subsample(total, cap)
-    if keep is not None:
-        # Fewer points cover the same surface: grow each by the square root of the thinning.
-        points, colors = points[keep], colors[keep]
-        radius = radius[keep] * np.sqrt(total / len(keep))
+    points, colors, radius, total = capture_points(capture, cap)
     preview = None
     if len(points):
         preview = point_cloud_object(f"{name} points", points, colors, radius, collection)

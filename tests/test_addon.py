@@ -177,20 +177,27 @@ def test_camera_intrinsics_reproduce_K(scene, K, size):
     np.testing.assert_allclose(_blender_K(obj, w, h, pixel_aspect(K)), K, rtol=1e-6, atol=1e-6 * w)
 
 
+def _mesh_coords(obj) -> np.ndarray:
+    co = np.empty(3 * len(obj.data.vertices), np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3)
+
+
 def test_import_capture_cap_is_deterministic_subset(scene, capture):
-    prefs = preferences.get()
-    prefs.preview_cap = 1000
     scene.artgs.capture_dir = str(capture)
+    bpy.ops.artgs.import_capture()
+    full = {tuple(r) for r in np.round(_mesh_coords(bpy.data.objects[f"{capture.name} points"]), 4)}
+    preferences.get().preview_cap = 1000
     scene.artgs.preview_density = 0.5
     coords = []
     for _ in range(2):
         bpy.ops.artgs.import_capture()
-        mesh = [o for o in bpy.data.collections[-1].objects if o.type == "MESH"][0].data
-        co = np.empty(3 * len(mesh.vertices), np.float32)
-        mesh.vertices.foreach_get("co", co)
-        coords.append(co)
-    assert len(coords[0]) == 3 * 500
+        obj = [o for o in bpy.data.collections[-1].objects if o.type == "MESH"][0]
+        coords.append(_mesh_coords(obj))
+    assert len(coords[0]) == 500 and len(full) > 1000
     np.testing.assert_array_equal(coords[0], coords[1])
+    assert all(tuple(r) in full for r in np.round(coords[0], 4))
+    assert f"500 of {len(full)} points" in scene.artgs.capture.message
 
 
 def _splats(n: int, seed: int = 0) -> SplatArrays:
