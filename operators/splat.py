@@ -22,7 +22,10 @@ def load_splat_preview(context: bpy.types.Context, path: Path) -> str:
     built = build_splat_preview(context, path, preview_cap(context))
     old = settings.splat_object
     if old is not None:
+        mesh = old.data
         bpy.data.objects.remove(old)
+        if mesh is not None and mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
     settings.splat_object = built.obj
     return f"{built.gaussians} Gaussians, preview {built.points} points ({built.seconds:.2f} s)"
 

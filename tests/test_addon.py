@@ -238,7 +238,7 @@ def test_import_splat_points_and_colours(scene, tmp_path):
     # Capped: a deterministic subset of the same Gaussians; the old preview is replaced.
     preferences.get().preview_cap, scene.artgs.preview_density = 1000, 0.3
     assert bpy.ops.artgs.import_splat() == {"FINISHED"}
-    assert len([o for o in bpy.data.objects if o.type == "MESH"]) == 1
+    assert len([o for o in bpy.data.objects if o.type == "MESH"]) == 1 == len(bpy.data.meshes)
     mesh = scene.artgs.splat_object.data
     assert len(mesh.vertices) == 300
     co = np.empty(900, np.float32)
