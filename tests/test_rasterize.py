@@ -12,6 +12,7 @@ import torch
 from artgs.core.cameras import Camera, intrinsics, look_at
 from artgs.core.device import resolve_backend, resolve_device
 from artgs.core.errors import ArtgsError
+from artgs.core import raster_reference
 from artgs.core.gaussians import Gaussians
 from artgs.core.raster_project import quat_to_rotmat
 from artgs.core.rasterize import rasterize, render
@@ -93,8 +94,9 @@ def test_matches_reference_general_camera():
     assert_match(result)
 
 
-def test_dense_scene_early_stop():
-    """Many overlapping opaque Gaussians: most pixels stop early, alphas clamp at 0.99."""
+def test_dense_scene_early_stop(monkeypatch):
+    """Many overlapping opaque Gaussians: deep stacks where the 1e-4 early stop changes the
+    image, and alphas clamped at 0.99."""
     params = random_scene(7, n=120, degree=2)
     params[2] = params[2] + 1.0          # larger
     params[3] = params[3].abs() + 2.0    # opaque (some beyond the 0.99 clamp)
@@ -102,6 +104,9 @@ def test_dense_scene_early_stop():
     alpha = result["reference"][0].alpha.detach()
     assert float((alpha > 0.999).double().mean()) > 0.3
     assert_match(result)
+    monkeypatch.setattr(raster_reference, "T_MIN", 0.0)   # no early stop
+    no_stop = rasterize(*params, K, np.eye(4), W, H, BG, backend="reference")
+    assert float((no_stop.rgb - result["reference"][0].rgb.detach()).abs().max()) > 1e-4
 
 
 def test_joint_transform_upstream():
