@@ -92,13 +92,22 @@ class View:
     ranges: dict[int | str, Any] = field(default_factory=dict, repr=False)   # per-step caches
 
     def changed_at(self, t: int) -> np.ndarray:
-        """Pixels whose surface at step ``t`` is not the closed state's (boolean image). With a
-        rendered closed state, :func:`mark_changed` sets these from the splat's geometry."""
+        """Pixels whose surface at step ``t`` came in front of the closed state's (boolean image):
+        where a part opened to (parts open outwards from the closed state; what they reveal lies
+        behind it). With a rendered closed state :func:`mark_changed` sets these."""
         key = f"changed{t}"
         if key not in self.ranges:
             d = self.depth[t]
-            self.ranges[key] = (d > 0) & ((self.ref <= 0)
-                                          | (np.abs(d - self.ref) > self.ref_threshold))
+            self.ranges[key] = (d > 0) & ((self.ref <= 0) | (d < self.ref - self.ref_threshold))
+        return self.ranges[key]
+
+    def nearest_at(self, t: int) -> np.ndarray:
+        """Nearest valid depth in each pixel's 3x3 neighbourhood at step ``t`` (0: none)."""
+        key = f"near{t}"
+        if key not in self.ranges:
+            d = self.depth[t]
+            near = minimum_filter(np.where(d > 0, d, np.inf), size=3, mode="nearest")
+            self.ranges[key] = np.where(np.isfinite(near), near, 0.0)
         return self.ranges[key]
 
     def range_at(self, t: int | str) -> tuple[np.ndarray, np.ndarray]:
@@ -112,7 +121,7 @@ class View:
 def mark_changed(views: list[View], points: np.ndarray, spacing: float) -> None:
     """For views whose closed state is a render: a pixel changed when its measured point is
     farther than ``max(threshold, 1.5 spacing)`` from every splat point (a render's error is too
-    large to compare depths with)."""
+    large to compare depths closely with) and not far behind the render."""
     tree = None
     for v in views:
         if v.ref_source != "splat":
@@ -125,7 +134,7 @@ def mark_changed(views: list[View], points: np.ndarray, spacing: float) -> None:
             valid = d > 0
             far = np.zeros(d.shape, bool)
             far[valid] = tree.query(P[valid], distance_upper_bound=tol)[0] > tol
-            v.ranges[f"changed{t}"] = far
+            v.ranges[f"changed{t}"] = far & ((v.ref <= 0) | (d < v.ref + v.ref_threshold))
 
 
 def depth_range(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -212,21 +221,33 @@ def _thresholds(v: View, config: MotionConfig, rendered: bool) -> tuple[float, f
     return thr, max(thr, config.render_sigmas * 1.4826 * err)
 
 
+def _pixels(v: View, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Project world points into ``v``: inside-image flags, flat pixel indices (0 outside), and
+    z-depths."""
+    if "proj" not in v.ranges:
+        w2c = v.camera.w2c
+        v.ranges["proj"] = (w2c[:3, :3].T.copy(), w2c[:3, 3].copy())
+    Rt, tr = v.ranges["proj"]
+    cam = points @ Rt + tr
+    z = cam[:, 2]
+    K = v.camera.K
+    h, w = v.ref.shape
+    with np.errstate(divide="ignore", invalid="ignore"):
+        j = np.floor(cam[:, 0] / z * K[0, 0] + K[0, 2])
+        i = np.floor(cam[:, 1] / z * K[1, 1] + K[1, 2])
+    inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
+    flat = np.where(inside, i * w + j, 0).astype(np.int64)
+    return inside, flat, z
+
+
 def _lookup(v: View, t: int | str, points: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Project world points into ``v`` at step ``t``: inside-image flags, their z-depth, and the
     depth range (near, far) of the surface at their pixels (0 = no object there)."""
-    uv, z = v.camera.project(points)
+    inside, flat, z = _pixels(v, points)
     lo_img, hi_img = v.range_at(t)
-    h, w = lo_img.shape
-    with np.errstate(invalid="ignore"):
-        j = np.floor(uv[:, 0]).astype(np.int64)
-        i = np.floor(uv[:, 1]).astype(np.int64)
-    inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
-    lo = np.zeros(len(points), np.float32)
-    hi = np.zeros(len(points), np.float32)
-    lo[inside] = lo_img[i[inside], j[inside]]
-    hi[inside] = hi_img[i[inside], j[inside]]
+    lo = np.where(inside, lo_img.reshape(-1)[flat], 0.0)
+    hi = np.where(inside, hi_img.reshape(-1)[flat], 0.0)
     return inside, z, lo, hi
 
 
@@ -241,7 +262,7 @@ def vanish_times(points: np.ndarray, views: list[View], times: list[int], spacin
     for v in views:
         inside, z, lo, hi = _lookup(v, "ref", points)
         if v.ref_source == "splat":   # splat points scatter about a spacing around surfaces
-            seen = _front_points(v, points, z, inside, spacing) & (z < hi + v.ref_threshold)
+            seen = _front_points(v, points, spacing) & (z < hi + v.ref_threshold)
             margin = max(v.threshold, 1.5 * spacing)
         else:
             seen = inside & (lo > 0) & (z > lo - v.threshold) & (z < hi + v.threshold)
@@ -260,23 +281,16 @@ def vanish_times(points: np.ndarray, views: list[View], times: list[int], spacin
     return first, count
 
 
-def _front_points(v: View, points: np.ndarray, z: np.ndarray, inside: np.ndarray,
-                  spacing: float) -> np.ndarray:
+def _front_points(v: View, points: np.ndarray, spacing: float) -> np.ndarray:
     """Which points are in front in ``v``: within ``max(threshold, 1.5 spacing)`` of the nearest
     point over their pixel (a point z-buffer; empty pixels take their 3x3 neighbourhood's). A
     rendered closed state blends depth layers, too loosely to tell the front points."""
-    h, w = v.ref.shape
-    uv, _ = v.camera.project(points)
-    pix = np.full(len(points), -1, np.int64)
-    pix[inside] = (np.floor(uv[inside, 1]).astype(np.int64) * w
-                   + np.floor(uv[inside, 0]).astype(np.int64))
-    zbuf = np.full(h * w, np.inf)
-    np.minimum.at(zbuf, pix[inside], z[inside])
-    zbuf = zbuf.reshape(h, w)
+    inside, flat, z = _pixels(v, points)
+    zbuf = np.full(v.ref.size, np.inf)
+    np.minimum.at(zbuf, flat[inside], z[inside])
+    zbuf = zbuf.reshape(v.ref.shape)
     zbuf = np.where(np.isfinite(zbuf), zbuf, minimum_filter(zbuf, size=3, mode="nearest"))
-    seen = np.zeros(len(points), bool)
-    seen[inside] = z[inside] < zbuf.reshape(-1)[pix[inside]] + max(v.threshold, 1.5 * spacing)
-    return seen
+    return inside & (z < zbuf.reshape(-1)[flat] + max(v.threshold, 1.5 * spacing))
 
 
 def floaters(points: np.ndarray, frames: list[Frame], margin: float) -> np.ndarray:
@@ -300,23 +314,66 @@ def floaters(points: np.ndarray, frames: list[Frame], margin: float) -> np.ndarr
     return through >= 2
 
 
-def group_parts(points: np.ndarray, first: np.ndarray, radius: float, min_points: int
-                ) -> list[np.ndarray]:
-    """Index arrays of moving parts: connected vanished points that first vanish within one step
-    of their neighbours. Largest first."""
+def moving_at(points: np.ndarray, views: list[View], times: list[int]) -> np.ndarray:
+    """(N, steps) flags: some view's depth at the point's pixel changed from the step before."""
+    active = np.zeros((len(points), len(times)), bool)
+    for v in views:
+        inside, flat, _ = _pixels(v, points)
+        for k in range(1, len(times)):
+            a, b = times[k - 1], times[k]
+            if a not in v.depth or b not in v.depth:
+                continue
+            da, db = v.depth[a].reshape(-1)[flat], v.depth[b].reshape(-1)[flat]
+            active[:, k] |= inside & (((da > 0) != (db > 0)) | (np.abs(db - da) > v.threshold))
+    return active
+
+
+def group_parts(points: np.ndarray, first: np.ndarray, active: np.ndarray, times: list[int],
+                radius: float, min_points: int, onset_ratio: float = 2.5) -> list[np.ndarray]:
+    """Index arrays of moving parts, largest first.
+
+    Vanished points within ``radius`` of each other are linked when they first vanish at the same
+    step, or one step apart while the earlier one's pixels still change (``active``, from
+    :func:`moving_at`): a door's hinge side vanishes steps after its edge. A group whose count of
+    newly vanished points jumps by ``onset_ratio`` from one step to the next holds a second part
+    starting there (a neighbouring drawer opened after the door); the links across that step are
+    cut.
+    """
     idx = np.flatnonzero(first >= 0)
     if len(idx) == 0:
         return []
+    f = first[idx]
     pairs = cKDTree(points[idx]).query_pairs(radius, output_type="ndarray")
     if len(pairs):
-        pairs = pairs[np.abs(first[idx[pairs[:, 0]]] - first[idx[pairs[:, 1]]]) <= 1]
-    n = len(idx)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) \
-        if len(pairs) else coo_matrix((n, n))
-    _, labels = connected_components(graph, directed=False)
+        a, b = pairs[:, 0], pairs[:, 1]
+        swap = f[a] > f[b]
+        a, b = np.where(swap, b, a), np.where(swap, a, b)
+        step = {t: k for k, t in enumerate(times)}
+        gap = f[b] - f[a]
+        keep = (gap == 0) | ((gap == 1) & active[idx[a], [step[t] for t in f[b]]])
+        pairs = np.stack([a, b], axis=1)[keep]
+    labels = _components(len(idx), pairs)
+    if len(pairs):
+        cut = np.zeros(len(pairs), bool)
+        for lab in np.unique(labels):
+            members = labels == lab
+            counts = {t: int(np.sum(f[members] == t)) for t in np.unique(f[members])}
+            for t, c in counts.items():
+                if t - 1 in counts and c > onset_ratio * counts[t - 1] and c >= min_points / 2:
+                    cut |= (labels[pairs[:, 0]] == lab) & (f[pairs[:, 1]] == t) \
+                        & (f[pairs[:, 0]] == t - 1)
+        if cut.any():
+            labels = _components(len(idx), pairs[~cut])
     parts = [idx[labels == lab] for lab in np.unique(labels)]
     parts = [p for p in parts if len(p) >= min_points]
     return sorted(parts, key=len, reverse=True)
+
+
+def _components(n: int, pairs: np.ndarray) -> np.ndarray:
+    """Connected-component label of each of ``n`` nodes linked by index ``pairs`` (M, 2)."""
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) \
+        if len(pairs) else coo_matrix((n, n))
+    return connected_components(graph, directed=False)[1]
 
 
 # --- measured points per step -------------------------------------------------------------------
@@ -375,10 +432,11 @@ def projective_score(points: np.ndarray, T: np.ndarray, views: list[View], t: in
     per point (-1..1).
 
     A point on a measured surface scores up to 1 (less as it nears the threshold), provided the
-    pixel changed since the closed state or the point stayed near its closed place (a moved part
-    cannot sit on geometry that was already there); one in front of a measured surface, or over a
-    pixel showing no object, scores -1 (it would have been seen); a hidden point (behind the
-    surface) or one outside every view scores 0. The best view counts.
+    surface there came in front of the closed state's (:meth:`View.changed_at`) or the point
+    stayed near its closed place (a moved part cannot sit on geometry that was already there).
+    A point in front of every measured surface of its pixel's 3x3 neighbourhood, or over a
+    neighbourhood showing no object, scores -1 (it would have been seen). A hidden point (behind
+    the surface) or one outside every view scores 0. The best view counts.
     """
     Y = apply(T, points)
     stayed = np.linalg.norm(Y - points, axis=1)
@@ -387,26 +445,19 @@ def projective_score(points: np.ndarray, T: np.ndarray, views: list[View], t: in
     for v in views:
         if t not in v.depth:
             continue
-        inside, z, lo, hi = _lookup(v, t, Y)
+        inside, flat, z = _pixels(v, Y)
+        lo_img, hi_img = v.range_at(t)
+        lo = np.where(inside, lo_img.reshape(-1)[flat], 0.0)
+        hi = np.where(inside, hi_img.reshape(-1)[flat], 0.0)
         has = inside & (lo > 0)
         off = np.maximum(np.maximum(lo - z, z - hi), 0.0) / v.threshold
-        new = _lookup_image(v, v.changed_at(t), Y) | (stayed < 2 * v.threshold)
+        new = (inside & v.changed_at(t).reshape(-1)[flat]) | (stayed < 2 * v.threshold)
         best = np.maximum(best, np.where(has & new & (off < 1), 1.0 - off * off, 0.0))
-        wrong |= (has & (z < lo - v.threshold)) | (inside & (lo <= 0) & (v.mask[t] is not None))
+        # contradictions only where the whole 3x3 neighbourhood agrees (edges are ambiguous)
+        near = np.where(inside, v.nearest_at(t).reshape(-1)[flat], 0.0)
+        wrong |= (inside & (near > 0) & (z < near - v.threshold)) \
+            | (inside & (near <= 0) & (v.mask[t] is not None))
     return float(np.where(best > 0, best, -wrong.astype(float)).sum()) / max(len(Y), 1)
-
-
-def _lookup_image(v: View, image: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Values of a boolean image at the points' pixels (False outside)."""
-    uv, z = v.camera.project(points)
-    h, w = image.shape
-    with np.errstate(invalid="ignore"):
-        j = np.floor(uv[:, 0]).astype(np.int64)
-        i = np.floor(uv[:, 1]).astype(np.int64)
-    inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
-    out = np.zeros(len(points), bool)
-    out[inside] = image[i[inside], j[inside]]
-    return out
 
 
 def polish(T: np.ndarray, points: np.ndarray, views: list[View], t: int, step: float,
@@ -534,14 +585,15 @@ def track_part(points: np.ndarray, views: list[View], times: list[int], start: i
             res = icp(model, P, N, H, tree=tree, max_distance=max(0.05, 4 * thr),
                       min_distance=thr / 2, iterations=config.icp_iterations,
                       keep=_visible(views, t))
-            s = projective_score(model, res.T, views, t)
-            if predicted is not None:
-                s -= config.jump_penalty * _jump(res.T, predicted, model)
-            if best is None or s > best[0]:
-                best = (s, res)
-        _, res = best
-        T, s = polish(res.T, model, views, t, 2 * thr, thr / 4)
-        Ts[t], score[t], rms[t] = T, s, res.rms
+            for cand in (res.T, H):   # ICP can slide off along flat faces: keep its start too
+                s = projective_score(model, cand, views, t)
+                if predicted is not None:
+                    s -= config.jump_penalty * _jump(cand, predicted, model)
+                if best is None or s > best[0]:
+                    best = (s, cand, res.rms)
+        _, T, rms_t = best
+        T, s = polish(T, model, views, t, 2 * thr, thr / 4)
+        Ts[t], score[t], rms[t] = T, s, rms_t
         prev.append(T)
         if s > config.grow_score and moved.any():
             back = apply(np.linalg.inv(T), P[moved])
@@ -586,7 +638,8 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
     first, count = vanish_times(pts, views, times, spacing)
     first[count < 2] = -1
     min_points = max(cfg.min_part_points, int(cfg.min_part_fraction * len(pts)))
-    parts = group_parts(pts, first, cfg.link_pixels * spacing, min_points)
+    parts = group_parts(pts, first, moving_at(pts, views, times), times,
+                        cfg.link_pixels * spacing, min_points)
     progress.update("propose", 0.1, f"{len(parts)} moving part(s)", parts=len(parts))
 
     clouds = {}
@@ -608,9 +661,7 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
                         cfg.min_rms_ratio)
         steps = [StepData(*clouds[t][:3], _visible(views, t)) for t in moving]
         thr = float(np.median([v.threshold for v in views]))
-        # the splat's own points of the part: unbiased by tracking (a turning face pins the hinge)
-        fit = refine_joint(fit, St, steps, rounds=cfg.refine_rounds, min_distance=thr / 2,
-                           max_distance=max(0.05, 4 * thr), point_weight=cfg.refine_point_weight)
+        fit = _refine(fit, St, steps, views, moving, thr, cfg)
         snapped = None
         if fit.type == "prismatic":
             fit, snapped = _snap_to_front(fit, S, cfg.snap_deg)
@@ -634,6 +685,34 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
                          "closed_state_threshold_mm": 1000 * v.ref_threshold} for v in views],
             "motion": diagnostics}
     return joints, meta
+
+
+def _refine(fit, St: np.ndarray, steps: list[StepData], views: list[View], moving: list[int],
+            thr: float, cfg: MotionConfig):
+    """Refine the joint on the measurements with the splat's own part points (unbiased by
+    tracking; a turning face pins its hinge). Revolute joints start also from hinges on the part's
+    box edges parallel to the axis (tracking of a door seen edge-on can misplace its hinge by
+    more than the refinement recovers); the start whose refined joint best explains the depth
+    maps (:func:`projective_score` over the steps) is refined to the end."""
+    def refined(f, rounds: int):
+        return refine_joint(f, St, steps, rounds=rounds, min_distance=thr / 2,
+                            max_distance=max(0.05, 4 * thr), point_weight=cfg.refine_point_weight)
+
+    def score(f) -> float:
+        return float(np.mean([projective_score(St, joint_transform(f.type, f.axis, f.origin, v),
+                                               views, t) for t, v in zip(moving, f.values)]))
+
+    starts = [fit]
+    if fit.type == "revolute":
+        c, axes, half = box_of(St)
+        for k in (1, 2):
+            if abs(axes[k] @ fit.axis) < 0.5:
+                starts += [replace(fit, origin=c + s * half[k] * axes[k]) for s in (-1.0, 1.0)]
+    if len(starts) == 1:
+        return refined(fit, cfg.refine_rounds)
+    first = cfg.refine_rounds // 2
+    best = max((refined(f, first) for f in starts), key=score)
+    return refined(best, cfg.refine_rounds - first)
 
 
 def _finite(x: float) -> float | None:

@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -89,6 +90,35 @@ def test_cabinet_both_types_noisy_and_simultaneous(data):
     _check(joints, gt, scores, max_ae=3.0, max_oe=3.0, max_state_rev=math.radians(5),
            max_state_pri=0.02)
     assert all(c["threshold_mm"] > 6.0 for c in meta["cameras"])   # noise raised the threshold
+
+
+def _crop_interaction(src: Path, dst: Path, keep: float) -> Path:
+    """A copy of a capture whose interaction frames show only the central ``keep`` of the image
+    (per-frame intrinsics), so opening parts leave the field of view."""
+    shutil.copytree(src, dst)
+    tj = json.loads((dst / "transforms.json").read_text())
+    w, h = int(tj["w"] * keep), int(tj["h"] * keep)
+    x0, y0 = (tj["w"] - w) // 2, (tj["h"] - h) // 2
+    for f in tj["frames"]:
+        if f.get("phase") != "interaction":
+            continue
+        for key in ("file_path", "depth_file_path", "mask_path"):
+            p = dst / f[key]
+            if p.suffix == ".npy":
+                np.save(p, np.load(p)[y0:y0 + h, x0:x0 + w])
+            else:
+                cv2.imwrite(str(p), cv2.imread(str(p), cv2.IMREAD_UNCHANGED)[y0:y0 + h, x0:x0 + w])
+        f.update({"w": w, "h": h, "cx": tj["cx"] - x0, "cy": tj["cy"] - y0})
+    (dst / "transforms.json").write_text(json.dumps(tj))
+    return dst
+
+
+def test_parts_partly_leaving_the_view(data):
+    cap = _crop_interaction(_capture(data, "cabinet", 2), data / "cabinet_cropped", 0.6)
+    joints, meta, gt, scores = _run(cap)
+    assert load_capture(cap).interaction[0].camera.width == 57
+    _check(joints, gt, scores, max_ae=4.0, max_oe=3.0, max_state_rev=math.radians(5),
+           max_state_pri=0.02)
 
 
 def test_closed_state_rendered_from_splat_without_time0_frames(data):
