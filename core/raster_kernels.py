@@ -19,21 +19,24 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from . import raster_model as model
+
 NF = 10  # floats per Gaussian in ``feats`` and its gradient
 TILE_W, TILE_H = 4, 4  # pixels per tile; the blend loops vectorise over its TILE_W * TILE_H pixels
 NPIX = TILE_W * TILE_H
 f32 = np.float32
-POWER_CUTOFF = f32(4.5)
-ALPHA_MIN = f32(1.0 / 255.0)
-ALPHA_MAX = f32(0.99)
-T_MIN = f32(1e-4)
+POWER_CUTOFF = f32(model.POWER_CUTOFF)
+ALPHA_MIN = f32(model.ALPHA_MIN)
+ALPHA_MAX = f32(model.ALPHA_MAX)
+T_MIN = f32(model.T_MIN)
 _ZERO, _HALF, _ONE = f32(0.0), f32(0.5), f32(1.0)
 _EXP_C = tuple(f32(1.0 / c) for c in (8.0, 2.0, 6.0, 24.0, 120.0, 720.0, 5040.0))
 
 
 @njit(inline="always", fastmath=True)
 def exp_neg(x):
-    """exp(-x) for x <= 4.5 (larger x is treated as 4.5), relative error < 5e-6; vectorisable.
+    """exp(-x) for x <= POWER_CUTOFF (larger x is treated as POWER_CUTOFF), relative error < 5e-6
+    up to 4.5; vectorisable.
 
     exp(-x) = (e^y)^8, y = -x/8, e^y by its degree-7 Taylor polynomial in Estrin form (short
     dependency chains)."""

@@ -16,10 +16,8 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-NEAR_PLANE = 0.01
-LOW_PASS = 0.3
-SIGMA_CUTOFF = 3.0
-POWER_CUTOFF = 0.5 * SIGMA_CUTOFF ** 2
+from .raster_model import FOV_PAD, LOW_PASS, NEAR_PLANE, SIGMA_CUTOFF
+
 
 
 class Projected(NamedTuple):
@@ -63,8 +61,8 @@ def project(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
     x, y = t[:, 0], t[:, 1]
 
     tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
-    lim_x_pos, lim_x_neg = (width - cx) / fx + 0.3 * tan_x, cx / fx + 0.3 * tan_x
-    lim_y_pos, lim_y_neg = (height - cy) / fy + 0.3 * tan_y, cy / fy + 0.3 * tan_y
+    lim_x_pos, lim_x_neg = (width - cx) / fx + FOV_PAD * tan_x, cx / fx + FOV_PAD * tan_x
+    lim_y_pos, lim_y_neg = (height - cy) / fy + FOV_PAD * tan_y, cy / fy + FOV_PAD * tan_y
     tx = z * torch.minimum(torch.maximum(x / z, -lim_x_neg), lim_x_pos)
     ty = z * torch.minimum(torch.maximum(y / z, -lim_y_neg), lim_y_pos)
 

@@ -11,11 +11,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from . import raster_model as model
+
 f32 = np.float32
-LOW_PASS = f32(0.3)
-SIGMA = f32(3.0)
+LOW_PASS = f32(model.LOW_PASS)
+SIGMA = f32(model.SIGMA_CUTOFF)
 _ZERO, _ONE, _TWO = f32(0.0), f32(1.0), f32(2.0)
-_FOV_PAD = f32(0.3)
+_FOV_PAD = f32(model.FOV_PAD)
 
 
 @njit(fastmath=True, cache=True)

@@ -11,11 +11,7 @@ from __future__ import annotations
 
 import torch
 
-from .raster_project import POWER_CUTOFF
-
-ALPHA_MIN = 1.0 / 255.0
-ALPHA_MAX = 0.99
-T_MIN = 1e-4
+from .raster_model import ALPHA_MAX, ALPHA_MIN, POWER_CUTOFF, T_MIN
 
 
 def composite_reference(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,

@@ -20,7 +20,8 @@ from typing import NamedTuple
 import torch
 
 from .device import resolve_backend
-from .raster_project import NEAR_PLANE, as_tensor, project
+from .raster_model import NEAR_PLANE
+from .raster_project import as_tensor, project
 from .raster_reference import composite_reference
 from .sh import eval_sh_colors
 

@@ -1,0 +1,21 @@
+"""Constants of the Gaussian splatting image model, shared by every rasterizer backend.
+
+- Gaussians with camera z <= ``NEAR_PLANE`` (metres) are culled.
+- The 2D covariance gets ``LOW_PASS`` px^2 added on its diagonal (3DGS's dilation).
+- The Jacobian of the projection is evaluated with x/z, y/z clamped to ``FOV_PAD`` beyond the
+  image edges (as a fraction of the half field of view), as gsplat does.
+- A Gaussian touches a pixel centre only inside its ``SIGMA_CUTOFF`` sigma ellipse, i.e.
+  where ``power = 0.5 d^T conic d <= POWER_CUTOFF``.
+- ``alpha = min(ALPHA_MAX, opacity * exp(-power))``; pairs with ``alpha < ALPHA_MIN`` are
+  skipped; compositing stops before the first Gaussian that would bring the transmittance
+  below ``T_MIN``.
+"""
+
+NEAR_PLANE = 0.01
+LOW_PASS = 0.3
+FOV_PAD = 0.3
+SIGMA_CUTOFF = 3.0
+POWER_CUTOFF = 0.5 * SIGMA_CUTOFF ** 2
+ALPHA_MIN = 1.0 / 255.0
+ALPHA_MAX = 0.99
+T_MIN = 1e-4
