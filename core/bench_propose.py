@@ -1,8 +1,9 @@
 """``artgs bench-propose``: accuracy of the motion route per category on synthetic captures.
 
 For each capture (generated with core.synth into a temporary folder, or taken from ``--data``):
-initialise the static splat from the static views (core.reconstruct.initial_splats), run the
-motion route (core.propose.propose) and score it against ``gt.json`` (core.metrics.match_joints).
+initialise the static splat from the static views (core.reconstruct.initial_splats, or optimise
+it with core.reconstruct.reconstruct for ``--iterations``), run the motion route
+(core.propose.propose) and score it against ``gt.json`` (core.metrics.match_joints).
 Prints per category: joints, type accuracy, AE mean/worst (deg), OE mean/worst (cm, revolute
 joints), seconds per capture; then overall.
 """
@@ -25,17 +26,23 @@ from .ply import write_ply
 from .progress import QUIET, Progress
 
 
-def bench_capture(capture_dir: Path, work: Path, device: str = "auto") -> dict:
-    """Propose joints for one synthetic capture and score them against its gt.json."""
+def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0
+                  ) -> dict:
+    """Propose joints for one synthetic capture and score them against its gt.json.
+
+    The static splat is the depth-initialised one, or optimised for ``iterations`` iterations.
+    """
     from .propose import propose
-    from .reconstruct import initial_splats
+    from .reconstruct import initial_splats, reconstruct
 
     capture = load_capture(capture_dir)
     gt = read_articulation(capture_dir / "gt.json")
     out = work / capture_dir.name
     out.mkdir(parents=True, exist_ok=True)
-    splat, _ = initial_splats(capture.static)
-    write_ply(out / "splat.ply", splat)
+    if iterations > 0:
+        reconstruct(capture, out, QUIET, iterations=iterations, device=device)
+    else:
+        write_ply(out / "splat.ply", initial_splats(capture.static)[0])
     t0 = time.perf_counter()
     art = propose(capture, out, QUIET, method="motion", device=device)
     seconds = time.perf_counter() - t0
@@ -80,7 +87,7 @@ def format_table(rows: list[dict]) -> str:
 
 def bench_propose_command(args, progress: Progress) -> int:
     """``artgs bench-propose [--data DIR] [--per-category N] [--seed S] [--depth-noise s]
-    [--simultaneous] [--category C ...] [--width W --height H]``."""
+    [--simultaneous] [--category C ...] [--width W --height H] [--iterations N]``."""
     with tempfile.TemporaryDirectory(prefix="artgs-bench-propose-") as tmp:
         tmp = Path(tmp)
         if args.data:
@@ -98,7 +105,7 @@ def bench_propose_command(args, progress: Progress) -> int:
         progress.start("bench-propose", f"{len(captures)} captures")
         results = []
         for k, cap in enumerate(captures):
-            r = bench_capture(Path(cap), tmp / "out", args.device)
+            r = bench_capture(Path(cap), tmp / "out", args.device, args.iterations)
             results.append(r)
             worst = max((s["ae"] for s in r["scores"]), default=0.0)
             progress.update("bench-propose", (k + 1) / len(captures), r["capture"],
@@ -109,6 +116,6 @@ def bench_propose_command(args, progress: Progress) -> int:
         progress.finished(rows=json.dumps(rows), results=json.dumps(results))
     else:
         print(f"depth noise {args.depth_noise} m, simultaneous {args.simultaneous}, "
-              f"{len(captures)} captures")
+              f"splat iterations {args.iterations}, {len(captures)} captures")
         print(format_table(rows))
     return 0

@@ -131,6 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="generated sets: only these categories")
     p.add_argument("--width", type=int, default=160, help="generated sets: image width")
     p.add_argument("--height", type=int, default=120, help="generated sets: image height")
+    p.add_argument("--iterations", type=int, default=0,
+                   help="optimise the static splat this many iterations (default 0: the "
+                        "depth-initialised splat)")
     _device(p)
     _common(p)
     return parser
