@@ -12,6 +12,7 @@ from typing import Callable
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.sparse import coo_matrix
 from scipy.spatial import cKDTree
 
 from .joints import rotation_about_axis
@@ -159,10 +160,9 @@ def icp(source: np.ndarray, target: np.ndarray, target_normals: np.ndarray, T0: 
             xi = np.linalg.solve(A + 1e-9 * np.eye(6), b)
         except np.linalg.LinAlgError:
             break
-        C = make_transform(np.eye(3), c)
-        T = C @ _se3_exp(xi) @ np.linalg.inv(C) @ T
+        T = make_transform(np.eye(3), c) @ _se3_exp(xi) @ make_transform(np.eye(3), -c) @ T
         cutoff = max(min(cutoff, 2.0 * float(np.percentile(r_pt[good], 90))), 2.0 * min_distance)
-        if np.linalg.norm(xi[:3]) < 1e-6 and np.linalg.norm(xi[3:]) < 1e-6 and it > 3:
+        if np.linalg.norm(xi[:3]) < 1e-5 and np.linalg.norm(xi[3:]) < 1e-5 and it > 3:
             break
     return IcpResult(T, rms, n_in, n_in / max(len(source), 1))
 
@@ -366,7 +366,16 @@ def refine_joint(fit: JointFit, points: np.ndarray, steps: list[StepData], *, ro
                 out.append((pw * sw[:, None] * diff).ravel())
             return np.concatenate(out)
 
-        x = least_squares(resid, x, method="trf", max_nfev=30, x_scale="jac").x
+        # each step's value moves only that step's residuals: finite differences by groups
+        rows = [np.eye(len(x), dtype=bool)]
+        for k, X, *_ in matches:
+            block = np.zeros((4 * len(X), len(x)), bool)
+            block[:, :n_geo] = True
+            block[:, n_geo + k] = True
+            rows.append(block)
+        sparsity = coo_matrix(np.concatenate(rows))
+        x = least_squares(resid, x, method="trf", max_nfev=30, x_scale="jac",
+                          jac_sparsity=sparsity, tr_options={"atol": 1e-12, "btol": 1e-12}).x
         cutoff = max(cutoff / 2, 3 * min_distance)
     a, p = unpack(x)
     values = x[n_geo:]
