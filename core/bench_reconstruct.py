@@ -22,7 +22,7 @@ from .capture import load_capture
 from .cli import CATEGORIES
 from .errors import InputError
 from .progress import Progress
-from .reconstruct import reconstruct
+from .reconstruct import ReconstructConfig, reconstruct
 
 HOLDOUT = 4
 TARGET_PSNR, TARGET_MAE_MM, TARGET_SECONDS = 30.0, 5.0, 60.0
@@ -54,8 +54,8 @@ def captures_in(data: Path) -> list[Path]:
     return found
 
 
-def run_benchmark(folders: list[Path], progress: Progress, device: str = "auto"
-                  ) -> list[dict[str, Any]]:
+def run_benchmark(folders: list[Path], progress: Progress, device: str = "auto",
+                  config: ReconstructConfig | None = None) -> list[dict[str, Any]]:
     """Reconstruct each capture (4 views held out) into a temporary folder; one row each."""
     captures = [(f, load_capture(f)) for f in folders]  # validate everything before any work
     rows = []
@@ -63,7 +63,7 @@ def run_benchmark(folders: list[Path], progress: Progress, device: str = "auto"
     for k, (folder, capture) in enumerate(captures):
         progress.update("bench-reconstruct", k / len(captures), f"{folder.name}", force=True)
         with tempfile.TemporaryDirectory(prefix="artgs_bench_") as out:
-            fig = reconstruct(capture, out, quiet, holdout=HOLDOUT, device=device)
+            fig = reconstruct(capture, out, quiet, holdout=HOLDOUT, device=device, config=config)
         rows.append({"object": folder.name, "category": _category(folder),
                      "psnr": fig["holdout_psnr"], "depth_mae_mm": fig["holdout_depth_mae_mm"],
                      "planar_mae_mm": fig["holdout_planar_depth_mae_mm"],
