@@ -20,6 +20,7 @@ from typing import NamedTuple
 import torch
 
 from .device import resolve_backend
+from .gaussians import Gaussians
 from .raster_model import NEAR_PLANE
 from .raster_project import as_tensor, project
 from .raster_reference import composite_reference
@@ -46,6 +47,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor
     width, height = int(width), int(height)
     if width < 1 or height < 1:
         raise ValueError(f"image size must be positive, not {width}x{height}")
+    Gaussians(means, quats, log_scales, opacity_logits, sh)  # raises ValueError on bad shapes
     backend = resolve_backend(backend, means.device)
     K, w2c = as_tensor(K, means), as_tensor(w2c, means)
     bg = (torch.zeros(3, dtype=means.dtype, device=means.device) if background is None

@@ -299,6 +299,16 @@ def test_render_with_camera_and_gaussians():
     assert float(ident.alpha.max()) > 0.9
 
 
+def test_bad_shapes_are_rejected():
+    params = random_scene(1, n=5)
+    with pytest.raises(ValueError, match="quats"):
+        rasterize(params[0], params[1][:, :3], *params[2:], K, np.eye(4), W, H)
+    with pytest.raises(ValueError, match="SH coefficient count"):
+        rasterize(*params[:4], torch.zeros(5, 5, 3, dtype=DT), K, np.eye(4), W, H)
+    with pytest.raises(ValueError, match="image size"):
+        rasterize(*params, K, np.eye(4), 0, H)
+
+
 def test_device_and_backend_resolution():
     assert resolve_device("cpu") == torch.device("cpu")
     assert resolve_backend("auto", torch.device("cpu")) == "cpu"
