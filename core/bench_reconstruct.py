@@ -69,10 +69,11 @@ def run_benchmark(folders: list[Path], progress: Progress, device: str = "auto",
                      "planar_mae_mm": fig["holdout_planar_depth_mae_mm"],
                      "seconds": fig["seconds"], "gaussians": fig["gaussians"],
                      "iterations": fig["iterations"]})
-        progress.log(f"{folder.name}: PSNR {rows[-1]['psnr']:.2f} dB, depth MAE "
-                     f"{rows[-1]['depth_mae_mm']:.2f} mm (planar {rows[-1]['planar_mae_mm']:.2f} mm), "
-                     f"{rows[-1]['seconds']:.1f} s, "
-                     f"{rows[-1]['gaussians']} Gaussians, {rows[-1]['iterations']} iterations")
+        r = rows[-1]
+        progress.log(f"{folder.name}: PSNR {r['psnr']:.2f} dB, depth MAE "
+                     f"{r['depth_mae_mm']:.2f} mm (planar {r['planar_mae_mm']:.2f} mm), "
+                     f"{r['seconds']:.1f} s, {r['gaussians']} Gaussians, "
+                     f"{r['iterations']} iterations")
     return rows
 
 

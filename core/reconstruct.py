@@ -7,9 +7,11 @@
 2. Optimise with Adam (per-parameter learning rates like 3DGS but lower: the depth-initialised
    splat is already close, and faster opacity/geometry rates made held-out depth drift), one random
    training view per step: ``0.8 L1 + 0.2 (1 - SSIM)`` of the render (black background) against
-   the masked image (L1 summed over the image, divided by the object pixels), ``+ depth L1`` (alpha-normalised expected depth vs measured depth, where measured
-   and inside the mask, relative to the object size), ``+ alpha L1`` against the mask (keeps the
-   background empty); densify (clone/split on view-space gradient) and prune (core/densify.py).
+   the masked image (L1 summed over the image, divided by the object pixels), ``+ depth L1``
+   (the rasterizer's alpha-normalised expected depth, or with ``planar_depth_loss`` the planar
+   depth of core/planar_depth.py, vs the measured depth where measured and inside the mask, in
+   units of 1% of the object size), ``+ alpha L1`` against the mask (keeps the background
+   empty); densify (clone/split on view-space gradient) and prune (core/densify.py).
 3. Stop when the training loss plateaus (relative drop over a window below a tolerance) or at
    the iteration cap; write OUT/splat.ply atomically (a cancel or crash leaves the previous one).
 
@@ -56,7 +58,7 @@ class ReconstructConfig:
     max_iterations: int = 1200          # cap when no explicit iteration count is given
     sh_degree: int = 1
     lambda_ssim: float = 0.2
-    lambda_depth: float = 0.1           # weight of depth L1 measured in units of 1% of the object size
+    lambda_depth: float = 0.1           # weight of depth L1 in units of 1% of the object size
     lambda_alpha: float = 0.5
     planar_depth_loss: bool = False     # depth loss on the planar depth (one more render/step)
     init_opacity: float = 0.95

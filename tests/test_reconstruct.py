@@ -168,3 +168,55 @@ def test_bad_input_fails_before_any_work(capture_dir, tmp_path, capsys):
     assert (out / outdir.SPLAT).read_bytes() == b"keep"
     with pytest.raises(InputError, match="iterations"):
         reconstruct(load_capture(capture_dir), out, QUIET, iterations=0)
+
+
+def test_ssim_matches_direct_2d_window():
+    import math
+    import torch.nn.functional as F
+    from artgs.core.ssim import ssim
+    g = torch.tensor([math.exp(-(x - 5) ** 2 / (2 * 1.5 ** 2)) for x in range(11)])
+    w = ((g / g.sum())[:, None] @ (g / g.sum())[None, :]).expand(3, 1, 11, 11).contiguous()
+    x = torch.rand(40, 50, 3, generator=torch.Generator().manual_seed(0))
+    y = (x + 0.1 * torch.randn(40, 50, 3, generator=torch.Generator().manual_seed(1))).clamp(0, 1)
+    a, b = x.permute(2, 0, 1)[None], y.permute(2, 0, 1)[None]
+
+    def f(t):
+        return F.conv2d(t, w, padding=5, groups=3)
+    mu1, mu2 = f(a), f(b)
+    s1, s2, s12 = f(a * a) - mu1 ** 2, f(b * b) - mu2 ** 2, f(a * b) - mu1 * mu2
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    ref = (((2 * mu1 * mu2 + c1) * (2 * s12 + c2)) /
+           ((mu1 ** 2 + mu2 ** 2 + c1) * (s1 + s2 + c2))).mean()
+    assert float(ssim(x, y)) == pytest.approx(float(ref), abs=1e-5)
+    assert float(ssim(x, x)) == pytest.approx(1.0, abs=1e-6)
+    mask = torch.zeros(40, 50, dtype=torch.bool)
+    mask[10:30, 10:40] = True
+    assert float(ssim(x, x, mask)) == pytest.approx(1.0, abs=1e-6)
+
+
+def test_densify_clones_splits_and_prunes():
+    from artgs.core.adam import Adam
+    from artgs.core.densify import DensifyConfig, Densifier
+    n = 6
+    params = {"means": torch.zeros(n, 3), "quats": torch.tensor([[1.0, 0, 0, 0]] * n),
+              "log_scales": torch.log(torch.tensor([[0.005] * 3, [0.05] * 3, [0.005] * 3,
+                                                    [0.005] * 3, [0.5] * 3, [0.005] * 3])),
+              "opacity_logits": torch.tensor([2.0, 2.0, 2.0, -8.0, 2.0, 2.0]),
+              "sh0": torch.arange(n, dtype=torch.float32).reshape(n, 1, 1).expand(n, 1, 3).clone()}
+    opt = Adam(params, {k: 0.01 for k in params})
+    d = Densifier(n, DensifyConfig(grad_threshold=1e-3, top_fraction=1.0, dense_size=0.01,
+                                   max_size=0.1))
+    grad = torch.zeros(n, 3)
+    grad[0, 0] = grad[1, 0] = 1.0  # 0 small -> clone, 1 large -> split
+    w2c = torch.eye(4)
+    w2c[2, 3] = 2.0
+    K = torch.tensor([[100.0, 0, 50], [0, 100.0, 50], [0, 0, 1]])
+    d.accumulate(opt.params["means"], grad, w2c, K, 100, 100)
+    counts = d.step(opt)
+    assert counts == {"cloned": 1, "split": 1, "pruned": 2}  # 3: transparent, 4: too large
+    ids = sorted(int(v) for v in opt.params["sh0"][:, 0, 0])
+    assert ids == [0, 0, 1, 1, 2, 5]  # 1 replaced by two children, 3 and 4 gone
+    child = opt.params["sh0"][:, 0, 0] == 1
+    np.testing.assert_allclose(opt.params["log_scales"][child].detach().exp().numpy(), 0.05 / 1.6,
+                               rtol=1e-5)
+    assert opt.m["means"].shape == (6, 3) and d.grad_sum.shape == (6,)
