@@ -754,15 +754,8 @@ def _make_joint(k: int, fit, values: dict[int, float], moving: list[int], S: np.
     extent = {"center": [float(x) for x in centre],
               "axes": [[float(x) for x in r] for r in box_axes],
               "half_size": [float(x) for x in (bhi - blo) / 2]}
-    # handle: the front of the part, farthest from the axis (revolute) / its middle (prismatic)
-    front = S[(S - centre) @ n >= np.percentile((S - centre) @ n, 90)]
-    if fit.type == "revolute":
-        rel = front - fit.origin
-        dist = np.linalg.norm(rel - np.outer(rel @ fit.axis, fit.axis), axis=1)
-        hp = front[np.argsort(dist)[int(0.97 * (len(front) - 1))]]
-    else:
-        hp = front.mean(axis=0)
-    handle = {"point": [float(x) for x in hp], "approach": [float(x) for x in -n]}
+    handle = {"point": [float(x) for x in handle_point(S, fit, n)],
+              "approach": [float(x) for x in -n]}
     v0 = views[0]
     uv, _ = v0.camera.project(_corners(centre, box_axes, (bhi - blo) / 2))
     size = np.array([v0.camera.width, v0.camera.height], float)
@@ -777,6 +770,19 @@ def _make_joint(k: int, fit, values: dict[int, float], moving: list[int], S: np.
                  origin=fit.origin if fit.type == "revolute" else centre,
                  limit=(lo, hi), states=values, source="motion", confidence=confidence,
                  bbox=bbox, handle=handle, extent=extent)
+
+
+def handle_point(S: np.ndarray, fit, n: np.ndarray) -> np.ndarray:
+    """Where to grasp the part (closed state): on a revolute part, its band farthest from the axis
+    (outer 15 % of the radius), on a prismatic one the whole front; there, the most protruding
+    points along the front normal ``n`` (a handle sticks out), averaged."""
+    band = S
+    if fit.type == "revolute":
+        rel = S - fit.origin
+        radius = np.linalg.norm(rel - np.outer(rel @ fit.axis, fit.axis), axis=1)
+        band = S[radius >= 0.85 * np.percentile(radius, 99)]
+    height = band @ n
+    return band[height >= np.percentile(height, 95)].mean(axis=0)
 
 
 def _corners(c: np.ndarray, axes: np.ndarray, half: np.ndarray) -> np.ndarray:

@@ -305,20 +305,23 @@ class StepData:
 
 def refine_joint(fit: JointFit, points: np.ndarray, steps: list[StepData], *, rounds: int = 4,
                  min_distance: float = 0.003, max_distance: float = 0.05,
-                 point_weight: float = 0.02) -> JointFit:
+                 point_weight: float = 0.02, prior: float = 0.01) -> JointFit:
     """Refine a joint fit directly on the measurements: one axis for all steps.
 
     ``points`` are part points in the closed state, ``steps[k]`` the measurements at the step of
     ``fit.values[k]``. Each round matches the model-placed points to the nearest measured points
     (Tukey weights on the point-to-plane residual), then solves the point-to-plane (plus
     ``point_weight`` point-to-point) least squares for the axis (direction, and the line's
-    position for revolute joints) and every step's value together.
+    position for revolute joints) and every step's value together. A weak pull (``prior`` per
+    radian or metre, against millimetre-scale residuals of hundreds of points) to the starting
+    values keeps the value of a step where the part is out of sight where tracking put it.
     """
     rev = fit.type == "revolute"
     a0, p0 = fit.axis.copy(), fit.origin.copy()
     u, v = _perp_basis(a0)
     n_geo = 4 if rev else 2
     x = np.concatenate([np.zeros(n_geo), fit.values])
+    x_init = x.copy()
     cutoff = max_distance
 
     def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -355,11 +358,9 @@ def refine_joint(fit: JointFit, points: np.ndarray, steps: list[StepData], *, ro
         rms = math.sqrt(sq / max(wsum, 1e-12))
         pw = math.sqrt(point_weight)
 
-        x_start = x.copy()
-
         def resid(x: np.ndarray) -> np.ndarray:
             # a weak pull to the start keeps values of steps without matches in place
-            out = [1e-3 * (x - x_start)]
+            out = [prior * (x - x_init)]
             for k, X, q, n, sw in matches:
                 diff = place(x, k, X) - q
                 out.append(sw * np.einsum("ij,ij->i", diff, n))
