@@ -342,15 +342,15 @@ def group_parts(points: np.ndarray, first: np.ndarray, active: np.ndarray, times
     idx = np.flatnonzero(first >= 0)
     if len(idx) == 0:
         return []
-    f = first[idx]
+    step = {t: k for k, t in enumerate(times)}
+    f = np.array([step[t] for t in first[idx]], np.int64)   # step indices (times may skip)
     pairs = cKDTree(points[idx]).query_pairs(radius, output_type="ndarray")
     if len(pairs):
         a, b = pairs[:, 0], pairs[:, 1]
         swap = f[a] > f[b]
         a, b = np.where(swap, b, a), np.where(swap, a, b)
-        step = {t: k for k, t in enumerate(times)}
         gap = f[b] - f[a]
-        keep = (gap == 0) | ((gap == 1) & active[idx[a], [step[t] for t in f[b]]])
+        keep = (gap == 0) | ((gap == 1) & active[idx[a], f[b]])
         pairs = np.stack([a, b], axis=1)[keep]
     labels = _components(len(idx), pairs)
     if len(pairs):

@@ -121,6 +121,21 @@ def test_parts_partly_leaving_the_view(data):
            max_state_pri=0.02)
 
 
+def test_interaction_times_need_not_be_consecutive(data):
+    cap = data / "cabinet_times"
+    shutil.copytree(_capture(data, "cabinet", 1), cap)
+    tj = json.loads((cap / "transforms.json").read_text())
+    for f in tj["frames"]:
+        if "time" in f:
+            f["time"] *= 5
+    (cap / "transforms.json").write_text(json.dumps(tj))
+    joints, meta, gt, _ = _run(cap)
+    for true in gt:
+        true.states = {5 * t: v for t, v in true.states.items()}
+    _check(joints, gt, match_joints(joints, gt), max_ae=2.0, max_oe=2.0,
+           max_state_rev=math.radians(3), max_state_pri=0.015)
+
+
 def test_closed_state_rendered_from_splat_without_time0_frames(data):
     """Cameras without a time-0 frame take the closed state from the splat (rasterizer)."""
     cap = _capture(data, "microwave", 1)
