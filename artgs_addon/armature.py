@@ -1,6 +1,9 @@
 """Joints as an editable Blender armature, and the (edited) joints read back from it.
 
-One armature object per articulated object, one bone per joint, named after the joint. The bone IS
+One armature object per articulated object, one bone per joint, named after the joint. The armature
+of an output folder is named after its capture (``armature_name``) and records the folder
+(``OUTPUT_KEY`` on the object), so several objects can share a scene: ``find_armature`` only
+returns the armature of the scene's current output folder (or one not yet tied to any folder). The bone IS
 the joint axis: head = the joint origin (a point on the hinge line; for a prismatic joint a point of
 the moving part), tail = head + axis * length. Roll carries no meaning. In pose mode a revolute
 bone only rotates about its own Y axis (head to tail) and a prismatic bone only slides along it,
@@ -32,6 +35,7 @@ from .bone_props import ArtgsJointProps
 SIZE_KEY = "artgs_size"    # on the armature data: object size in metres; marks ArtGS armatures
 META_KEY = "artgs_meta"    # on the armature data: the joints file's top-level fields (JSON)
 NAME_KEY = "artgs_name"    # on the armature data: the ``name`` it was built under
+OUTPUT_KEY = "artgs_output"  # on the armature object: the output folder its joints belong to
 BONE_LENGTH = 0.25         # bone length as a fraction of the object size
 COLOURS = {"revolute": "THEME04", "prismatic": "THEME03"}  # bone colour palettes: blue, green
 CONSTRAINT = "ArtGS Limit"
@@ -46,14 +50,32 @@ def is_joint_armature(obj: bpy.types.Object | None) -> bool:
     return obj is not None and obj.type == "ARMATURE" and SIZE_KEY in obj.data
 
 
+def armature_name(capture: Path | None, output: Path | None) -> str:
+    """Name of an object's joints armature: "ArtGS Joints <capture folder name>" (else the output
+    folder's name)."""
+    folder = capture if capture is not None and capture.name else output
+    return f"ArtGS Joints {folder.name}" if folder is not None and folder.name else "ArtGS Joints"
+
+
+def output_key(output: Path) -> str:
+    """How an output folder is recorded on its armature (``OUTPUT_KEY``)."""
+    return str(Path(output).resolve())
+
+
 def find_armature(context: bpy.types.Context) -> bpy.types.Object | None:
-    """The joints armature to work on: the active one, the active preview's, else the first."""
-    obj = context.active_object
-    if is_joint_armature(obj):
-        return obj
-    if obj is not None and is_joint_armature(obj.parent):
-        return obj.parent
-    return next((o for o in context.scene.objects if is_joint_armature(o)), None)
+    """The joints armature to work on: the active one, the active preview's, else the first in the
+    scene; with an output folder in the scene settings, only the armature recorded for that folder
+    qualifies, or, if there is none, one recorded for no folder (never another folder's)."""
+    active = context.active_object
+    candidates = [o for o in (active, active.parent if active is not None else None,
+                              *context.scene.objects) if is_joint_armature(o)]
+    settings = getattr(context.scene, "artgs", None)
+    output = settings.output_path if settings is not None else None
+    if output is not None:
+        key = output_key(output)
+        candidates = ([o for o in candidates if o.get(OUTPUT_KEY) == key]
+                      or [o for o in candidates if OUTPUT_KEY not in o])
+    return candidates[0] if candidates else None
 
 
 def previews_of(obj: bpy.types.Object) -> list[bpy.types.Object]:
@@ -74,11 +96,12 @@ def check_transform(obj: bpy.types.Object) -> None:
 
 def build_armature(context: bpy.types.Context, articulation: Articulation,
                    preview: bpy.types.Object | None = None, size: float = 1.0,
-                   name: str = "ArtGS Joints") -> bpy.types.Object:
+                   name: str = "ArtGS Joints", output: Path | None = None) -> bpy.types.Object:
     """Create, or rebuild in place, the armature ``name`` with one bone per joint (world frame).
 
-    The armature built earlier under ``name`` is rebuilt even if the user renamed it; it keeps
-    its object transform: bones are placed so the joints are right in the
+    With ``output`` the armature recorded for that output folder is rebuilt (a new one records
+    it); without, the one built under ``name`` for no folder. It is rebuilt even if the user
+    renamed it and keeps its object transform: bones are placed so the joints are right in the
     world. With ``preview`` (a mesh whose vertices are the object's points), each joint's points
     (``core.parts.assign_parts``) go to a vertex group named after its bone and an Armature
     modifier deforms them, so posing a bone moves its part; the preview is parented to the armature.
@@ -91,12 +114,14 @@ def build_armature(context: bpy.types.Context, articulation: Articulation,
                              f"too long for a Blender bone; rename it")
     if preview is not None and preview.type != "MESH":
         raise ArtgsError(f"preview '{preview.name}' must be a mesh object, not {preview.type}")
-    obj = _built_under(name)
+    obj = _built_before(name, output)
     if obj is None:
         obj = bpy.data.objects.new(name, bpy.data.armatures.new(name))
         context.collection.objects.link(obj)
         obj.show_in_front = True
         obj.data[NAME_KEY] = name
+        if output is not None:
+            obj[OUTPUT_KEY] = output_key(output)
     context.view_layer.update()
     check_transform(obj)
     arm = obj.data
@@ -126,9 +151,14 @@ def build_armature(context: bpy.types.Context, articulation: Articulation,
     return obj
 
 
-def _built_under(name: str) -> bpy.types.Object | None:
-    """The joints armature built under ``name`` (the one still called so first), if any."""
-    found = [o for o in bpy.data.objects if is_joint_armature(o) and o.data.get(NAME_KEY) == name]
+def _built_before(name: str, output: Path | None) -> bpy.types.Object | None:
+    """The joints armature recorded for ``output``, or (without a folder) the one built under
+    ``name`` for no folder; the one still called ``name`` first."""
+    arms = [o for o in bpy.data.objects if is_joint_armature(o)]
+    if output is not None:
+        found = [o for o in arms if o.get(OUTPUT_KEY) == output_key(output)]
+    else:
+        found = [o for o in arms if OUTPUT_KEY not in o and o.data.get(NAME_KEY) == name]
     return next((o for o in found if o.name == name), found[0] if found else None)
 
 

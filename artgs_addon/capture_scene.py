@@ -1,5 +1,8 @@
 """A capture in the scene: one camera per static frame and per fixed interaction camera, with the
-capture's intrinsics, and a coloured point-cloud preview of the static frames' depth."""
+capture's intrinsics, and a coloured point-cloud preview of the static frames' depth.
+
+Built from the engine's capture preview file (``core.capture_preview``) with numpy only: the images
+are decoded in the engine, never in Blender's process."""
 
 from __future__ import annotations
 
@@ -11,9 +14,9 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..core.capture import Capture, Frame
 from ..core.cameras import Camera
-from .pointcloud import point_cloud_object, subsample
+from ..core.capture_preview import CapturePreview
+from .pointcloud import point_cloud_object
 
 #: Sensor width of the imported cameras, millimetres (any value works; the focal length follows).
 SENSOR_WIDTH = 36.0
@@ -61,72 +64,48 @@ def camera_object(name: str, camera: Camera, collection: bpy.types.Collection) -
     return obj
 
 
-def _interaction_cameras(frames: list[Frame]) -> list[Frame]:
-    """One frame per distinct fixed camera of the interaction sequence (same K, pose and size)."""
-    seen: list[Frame] = []
-    for f in frames:
-        c = f.camera
-        if not any(np.allclose(c.c2w, s.camera.c2w, atol=1e-6) and np.allclose(c.K, s.camera.K)
-                   and (c.width, c.height) == (s.camera.width, s.camera.height) for s in seen):
-            seen.append(f)
-    return seen
+def camera_rows(preview: CapturePreview) -> list[tuple[str, int]]:
+    """(label, frame index) of the cameras to add: every static frame (labelled by its file
+    name) and one per distinct fixed camera of the interaction sequence (same K, pose, size)."""
+    phase = preview.phase
+    rows = [(Path(str(preview.file_path[i])).stem, int(i))
+            for i in np.flatnonzero(phase == "static")]
+    inter = np.flatnonzero(phase == "interaction")
+    if len(inter):
+        # distinct rows of (c2w, K, width, height) rounded to 1e-6 (the file's order kept)
+        key = np.concatenate([preview.c2w[inter].reshape(len(inter), -1),
+                              preview.K[inter].reshape(len(inter), -1),
+                              np.stack([preview.width[inter], preview.height[inter]], 1)], axis=1)
+        _, first = np.unique(np.round(key, 6), axis=0, return_index=True)
+        rows += [(f"interaction camera {k}", int(inter[i])) for k, i in enumerate(np.sort(first))]
+    return rows
 
 
-def capture_points(capture: Capture, cap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Static frames' depth back-projected, at most ``cap`` points (a deterministic random subset,
-    chosen before back-projecting so memory stays bounded): world points (N,3), sRGB colours (N,3)
-    in 0..1, radius (N,) metres (half a pixel's footprint, grown by the square root of the
-    thinning), and the number of points available before the cap."""
-    frames = [f for f in capture.static if f.depth is not None]
-    valid = []
-    for f in frames:
-        ok = np.isfinite(f.depth) & (f.depth > 0)
-        valid.append(np.flatnonzero(ok if f.mask is None else ok & f.mask))
-    counts = np.array([len(v) for v in valid], dtype=np.int64)
-    total = int(counts.sum())
-    keep = subsample(total, cap)
-    thinning = 1.0 if keep is None else float(np.sqrt(total / max(len(keep), 1)))
-    starts = np.concatenate([[0], np.cumsum(counts)])
-    pts, cols, rads = [], [], []
-    for k, f in enumerate(frames):
-        chosen = valid[k] if keep is None else \
-            valid[k][keep[(keep >= starts[k]) & (keep < starts[k + 1])] - starts[k]]
-        selected = np.zeros(f.depth.size, bool)
-        selected[chosen] = True
-        world, idx = f.camera.backproject(f.depth, selected.reshape(f.depth.shape))
-        pts.append(world)
-        cols.append(f.rgb.reshape(-1, 3)[idx].astype(np.float32) / 255.0)
-        rads.append(thinning * 0.5 * f.depth.reshape(-1)[idx] / float(f.camera.K[0, 0]))
-    if not pts:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.float32), np.zeros(0, np.float32), 0
-    return np.concatenate(pts), np.concatenate(cols), np.concatenate(rads), total
-
-
-def build_capture(context: bpy.types.Context, capture: Capture, cap: int) -> CaptureScene:
-    """Add the capture's cameras and point preview (at most ``cap`` points) in a new collection
-    named after the capture folder; the render resolution follows the first static frame."""
-    name = Path(capture.root).name or "capture"
+def build_capture(context: bpy.types.Context, preview: CapturePreview) -> CaptureScene:
+    """Add the preview's cameras and coloured points in a new collection named after the capture
+    folder; the render resolution follows the first static frame."""
+    name = Path(preview.summary.get("capture", "")).name or "capture"
+    t0 = time.perf_counter()
     collection = bpy.data.collections.new(name)
     context.scene.collection.children.link(collection)
-    named = [(Path(f.file_path).stem, f) for f in capture.static]
-    named += [(f"interaction camera {k}", f)
-              for k, f in enumerate(_interaction_cameras(capture.interaction))]
     cameras = []
-    for label, f in named:
-        obj = camera_object(f"{name} {label}", f.camera, collection)
-        obj["artgs_frame"] = f.file_path
+    for label, i in camera_rows(preview):
+        camera = Camera(preview.K[i], preview.c2w[i], int(preview.width[i]), int(preview.height[i]))
+        obj = camera_object(f"{name} {label}", camera, collection)
+        obj["artgs_frame"] = str(preview.file_path[i])
         cameras.append(obj)
-    first = (capture.static or capture.frames)[0].camera
+    static = np.flatnonzero(preview.phase == "static")
+    first = int(static[0]) if len(static) else 0
     render = context.scene.render
-    render.resolution_x, render.resolution_y = first.width, first.height
+    render.resolution_x, render.resolution_y = int(preview.width[first]), int(preview.height[first])
     render.resolution_percentage = 100
-    render.pixel_aspect_x, render.pixel_aspect_y = pixel_aspect(first.K)
-    context.scene.camera = cameras[0]
-
-    t0 = time.perf_counter()
-    points, colors, radius, total = capture_points(capture, cap)
-    preview = None
-    if len(points):
-        preview = point_cloud_object(f"{name} points", points, colors, radius, collection)
-    seconds = time.perf_counter() - t0
-    return CaptureScene(collection, cameras, preview, total, len(points), seconds)
+    render.pixel_aspect_x, render.pixel_aspect_y = pixel_aspect(preview.K[first])
+    if cameras:
+        context.scene.camera = cameras[0]
+    points = None
+    if len(preview.points):
+        points = point_cloud_object(f"{name} points", preview.points,
+                                    preview.colors.astype(np.float32) / 255.0, preview.radius,
+                                    collection)
+    return CaptureScene(collection, cameras, points, preview.points_total, len(preview.points),
+                        time.perf_counter() - t0)

@@ -17,13 +17,6 @@ _MATERIAL = "ArtGS Point Colour"
 _MODIFIER = "ArtGS Points"
 
 
-def subsample(count: int, cap: int, seed: int = 0) -> np.ndarray | None:
-    """Sorted indices of a deterministic random subset of ``cap`` out of ``count``, or None (all)."""
-    if count <= cap:
-        return None
-    return np.sort(np.random.default_rng(seed).choice(count, size=cap, replace=False))
-
-
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     """sRGB-encoded colours in 0..1 -> scene-linear (Blender colour attributes are linear)."""
     c = np.clip(c, 0.0, 1.0)

@@ -15,8 +15,10 @@ import bpy
 import numpy as np
 
 from ..core.ply import SplatArrays, read_ply
-from .pointcloud import point_cloud_object, subsample
+from ..core.sampling import subsample
+from .pointcloud import point_cloud_object
 
+SPLAT_KEY = "artgs_splat"  # on a splat preview object: the PLY it shows (absolute path)
 #: Degree-0 real spherical harmonic Y_0^0 (core.sh.C0): colour = 0.5 + C0 * dc.
 SH_C0 = 0.5 / math.sqrt(math.pi)
 
@@ -50,6 +52,20 @@ def build_splat_preview(context: bpy.types.Context, path: str | Path, cap: int,
     name = f"{path.parent.name} splat" if path.parent.name else "splat"
     obj = point_cloud_object(name, splats.means[sel], splat_colors(splats)[sel], radius,
                              collection, extra={"opacity": opacity})
-    obj["artgs_splat"] = str(path)
+    obj[SPLAT_KEY] = str(path.resolve())
     obj["artgs_gaussians"] = total
     return SplatPreview(obj, total, len(obj.data.vertices), time.perf_counter() - t0)
+
+
+def splat_preview_in(folder: Path, preferred: bpy.types.Object | None = None
+                     ) -> bpy.types.Object | None:
+    """The splat preview of a PLY in ``folder`` (an output folder): ``preferred`` if it is one,
+    else the first such object, else None."""
+    folder = Path(folder).resolve()
+
+    def shows(obj: bpy.types.Object | None) -> bool:
+        return obj is not None and SPLAT_KEY in obj and Path(obj[SPLAT_KEY]).parent == folder
+
+    if shows(preferred):
+        return preferred
+    return next((o for o in bpy.data.objects if shows(o)), None)

@@ -2,8 +2,11 @@
 
 No bpy here (unit-tested outside Blender). Reader threads move the worker's JSON progress lines
 (protocol in ``core/progress.py``) into a queue; ``poll()`` drains it. ``cancel()`` terminates the
-process (the engine exits 130 on SIGTERM) and kills it after a grace period. Engine errors reach
-the user as the message of the last ``{"event": "error"}`` line, never as a traceback.
+process (the engine exits 130 on SIGTERM) and kills it after a grace period. A process stopped this
+way counts as cancelled however it ended: 130, or killed by the signal itself when it came before
+the engine installed its handler (still starting Python or importing), or killed after the grace
+period. Engine errors reach the user as the message of the last ``{"event": "error"}`` line, never
+as a traceback.
 """
 
 from __future__ import annotations
@@ -72,7 +75,7 @@ class Worker:
         self._stderr_tail: deque[str] = deque(maxlen=20)
         self._threads: list[threading.Thread] = []
         self._proc: subprocess.Popen[str] | None = None
-        self._cancelled = False
+        self._terminated = False
         self.error: str | None = None
         self.outputs: dict[str, Any] = {}
         self.last_progress: dict[str, Any] | None = None
@@ -134,12 +137,19 @@ class Worker:
             events.append(event)
         return events
 
+    @property
+    def pid(self) -> int | None:
+        """The engine process id once started."""
+        return None if self._proc is None else self._proc.pid
+
     def cancel(self) -> None:
-        """Ask the engine to stop (SIGTERM), kill it if it has not ended after the grace period."""
-        self._cancelled = True
+        """Ask the engine to stop (SIGTERM), kill it if it has not ended after the grace period.
+
+        A process that has already ended keeps its own outcome."""
         proc = self._proc
         if proc is None or proc.poll() is not None:
             return
+        self._terminated = True
         proc.terminate()
         try:
             proc.wait(self.grace)
@@ -173,7 +183,7 @@ class Worker:
             t.join()
         self.poll()
         code = self._proc.returncode
-        cancelled = self._cancelled or code == CANCELLED
+        cancelled = code == CANCELLED or (self._terminated and code != 0)
         error = None
         if cancelled:
             error = "cancelled"

@@ -24,6 +24,7 @@ CATEGORIES = ("dishwasher", "refrigerator", "oven", "microwave", "storage", "dra
 _COMMANDS: dict[str, str] = {
     "synth": "synth:synth_command",
     "validate": "capture:validate_command",
+    "capture-preview": "capture_preview:capture_preview_command",
     "run": "pipeline:run_command",
     "reconstruct": "reconstruct:reconstruct_command",
     "propose": "propose:propose_command",
@@ -75,6 +76,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("validate", help="check a capture folder and print a summary")
     p.add_argument("capture")
+    _common(p)
+
+    p = sub.add_parser("capture-preview",
+                       help="check a capture and write its cameras and point preview (.npz) "
+                            "for Blender's Import Capture")
+    p.add_argument("capture")
+    p.add_argument("--preview", required=True, help=".npz file to write (atomically)")
+    p.add_argument("--max-points", type=int, default=200_000,
+                   help="most points in the preview (a deterministic random subset)")
     _common(p)
 
     p = sub.add_parser("run", help="the whole pipeline on one capture folder")

@@ -53,7 +53,8 @@ class WorkerOperator:
 
     Subclasses set ``stage`` (a ``Scene.artgs`` stage) and ``command``, and implement
     ``worker_args`` and ``finish`` (build the Blender side from the engine's outputs; return the
-    key figures for the panel). ``prepare`` may refuse to start with a message.
+    key figures for the panel). ``prepare`` may refuse to start with a message; ``cleanup`` runs
+    once the job has ended, however it ended (after ``prepare``, even when it refused).
     """
 
     stage: ClassVar[str]
@@ -69,6 +70,9 @@ class WorkerOperator:
 
     def worker_env(self, context: bpy.types.Context) -> dict[str, str]:
         return {}
+
+    def cleanup(self, context: bpy.types.Context) -> None:
+        """Remove what ``prepare`` made (temporary files)."""
 
     def finish(self, context: bpy.types.Context, result: WorkerResult) -> str:
         raise NotImplementedError
@@ -92,6 +96,7 @@ class WorkerOperator:
                 reason = str(exc)
         if reason is not None:
             self._fail(context, reason)
+            self.cleanup(context)
             return False
         state.set("RUNNING", "starting")
         return True
@@ -115,6 +120,12 @@ class WorkerOperator:
                 self.report({"WARNING"}, str(event.get("message", "")))
 
     def _complete(self, context: bpy.types.Context) -> set[str]:
+        try:
+            return self._conclude(context)
+        finally:
+            self.cleanup(context)
+
+    def _conclude(self, context: bpy.types.Context) -> set[str]:
         result = self._worker.result
         state = self._state(context)
         if result.cancelled:
@@ -153,6 +164,7 @@ class WorkerOperator:
 
     def modal(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
         if (self._worker, self._timer) not in _ACTIVE:  # cancelled by unregister
+            self.cleanup(context)
             return {"CANCELLED"}
         if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
             self._worker.cancel()

@@ -7,8 +7,8 @@ from typing import Callable
 import bpy
 from bpy.props import EnumProperty, StringProperty
 
-from ..artgs_addon.armature import (add_joint, build_armature, find_armature, remove_joint,
-                                    save_joints)
+from ..artgs_addon.armature import (OUTPUT_KEY, add_joint, armature_name, build_armature,
+                                    find_armature, output_key, remove_joint, save_joints)
 from ..artgs_addon.bone_props import JOINT_TYPE_ITEMS
 from ..core.errors import ArtgsError
 from ..core.joints import Articulation
@@ -42,7 +42,8 @@ def _object_size(context: bpy.types.Context) -> float:
 
 
 class ARTGS_OT_add_joint(bpy.types.Operator):
-    """Add a joint (bone) at the 3D cursor, about the world Z axis; creates the armature if needed"""
+    """Add a joint (bone) at the 3D cursor, about the world Z axis; creates the output folder's
+    armature if needed"""
 
     bl_idname = "artgs.add_joint"
     bl_label = "Add Joint"
@@ -58,7 +59,11 @@ class ARTGS_OT_add_joint(bpy.types.Operator):
         def add() -> str:
             obj = find_armature(context)
             if obj is None:
-                obj = build_armature(context, Articulation([]), size=_object_size(context))
+                settings = context.scene.artgs
+                obj = build_armature(context, Articulation([]), size=_object_size(context),
+                                     name=armature_name(settings.capture_path,
+                                                        settings.output_path),
+                                     output=settings.output_path)
             name = add_joint(context, obj, context.scene.cursor.location, (0.0, 0.0, 1.0),
                              self.joint_type)
             return f"Added {self.joint_type} joint '{name}' to '{obj.name}'"
@@ -122,7 +127,7 @@ class ARTGS_OT_select_joint(bpy.types.Operator):
 
 
 class ARTGS_OT_save_joints(bpy.types.Operator):
-    """Write the joints, with your edits, to proposals.json in the output folder; later stages use them"""
+    """Write the output folder's joints, with your edits, to proposals.json there; later stages use them"""
 
     bl_idname = "artgs.save_joints"
     bl_label = "Save Joints"
@@ -131,7 +136,7 @@ class ARTGS_OT_save_joints(bpy.types.Operator):
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
         if find_armature(context) is None:
-            cls.poll_message_set("No joints armature in the scene")
+            cls.poll_message_set("No joints armature for this output folder in the scene")
             return False
         settings = getattr(context.scene, "artgs", None)
         if settings is None or settings.output_path is None:
@@ -141,10 +146,12 @@ class ARTGS_OT_save_joints(bpy.types.Operator):
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         obj = find_armature(context)
-        path = context.scene.artgs.output_path / PROPOSALS
+        output = context.scene.artgs.output_path
+        path = output / PROPOSALS
 
         def save() -> str:
             joints = save_joints(obj, path)
+            obj[OUTPUT_KEY] = output_key(output)  # an armature of no folder now belongs to this one
             edited = sum(j.source == "user" for j in joints)
             return f"Saved {len(joints)} joints ({edited} by the user) to {path}"
 

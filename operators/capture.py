@@ -1,16 +1,21 @@
-"""Import Capture: the capture's cameras and a coloured point preview, in Blender's process."""
+"""Import Capture: the engine (``artgs capture-preview``) validates the capture and writes its
+cameras and a capped point preview to a temporary .npz; Blender builds them with numpy only."""
 
 from __future__ import annotations
 
-import sys
+import shutil
+import tempfile
+from pathlib import Path
 
 import bpy
 
 from ..artgs_addon import preferences
 from ..artgs_addon.capture_scene import build_capture
-from ..core.capture import load_capture
-from ..core.errors import ArtgsError
-from ._job import job_running
+from ..artgs_addon.worker import WorkerResult
+from ..core.capture_preview import read_preview
+from ._job import WorkerOperator, job_running
+
+PREVIEW_FILE = "capture_preview.npz"
 
 
 def preview_cap(context: bpy.types.Context) -> int:
@@ -18,12 +23,15 @@ def preview_cap(context: bpy.types.Context) -> int:
     return max(1, int(preferences.get(context).preview_cap * context.scene.artgs.preview_density))
 
 
-class ARTGS_OT_import_capture(bpy.types.Operator):
-    """Add the capture's cameras and a coloured point cloud of its static depth frames"""
+class ARTGS_OT_import_capture(WorkerOperator, bpy.types.Operator):
+    """Add the capture's cameras and a coloured point cloud of its static depth frames (the
+    capture is read and checked in the engine)"""
 
     bl_idname = "artgs.import_capture"
     bl_label = "Import Capture"
     bl_options = {"REGISTER", "UNDO"}
+    stage = "capture"
+    command = "capture-preview"
 
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
@@ -31,27 +39,21 @@ class ARTGS_OT_import_capture(bpy.types.Operator):
         path = settings.capture_path if settings else None
         return not job_running() and path is not None and (path / "transforms.json").is_file()
 
-    def execute(self, context: bpy.types.Context) -> set[str]:
-        settings = context.scene.artgs
-        state = settings.capture
-        try:
-            capture = load_capture(settings.capture_path)
-        except (ArtgsError, OSError) as exc:
-            return self._fail(state, str(exc))
-        except ImportError as exc:  # Blender's own Python has no OpenCV to decode the images
-            return self._fail(state, f"reading the capture needs {exc.name or exc} in Blender's "
-                              f"Python: {sys.executable} -m pip install opencv-python-headless")
-        built = build_capture(context, capture, preview_cap(context))
-        summary = (f"{len(built.cameras)} cameras, {built.points_kept} of {built.points_total} "
-                   f"points ({built.build_seconds:.2f} s)")
-        state.set("DONE", summary, 1.0)
-        self.report({"INFO"}, f"Imported {built.collection.name}: {summary}")
-        return {"FINISHED"}
+    def prepare(self, context: bpy.types.Context) -> str | None:
+        self._tmp = Path(tempfile.mkdtemp(prefix="artgs-capture-"))
+        return None
 
-    def _fail(self, state, message: str) -> set[str]:
-        state.set("FAILED", message)
-        self.report({"ERROR"}, message)
-        return {"CANCELLED"}
+    def worker_args(self, context: bpy.types.Context) -> list[str]:
+        return [str(context.scene.artgs.capture_path), "--preview", str(self._tmp / PREVIEW_FILE),
+                "--max-points", str(preview_cap(context))]
+
+    def finish(self, context: bpy.types.Context, result: WorkerResult) -> str:
+        built = build_capture(context, read_preview(self._tmp / PREVIEW_FILE))
+        return (f"{len(built.cameras)} cameras, {built.points_kept} of {built.points_total} "
+                f"points ({built.build_seconds:.2f} s)")
+
+    def cleanup(self, context: bpy.types.Context) -> None:
+        shutil.rmtree(self._tmp, ignore_errors=True)
 
 
 CLASSES = (ARTGS_OT_import_capture,)

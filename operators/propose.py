@@ -6,8 +6,9 @@ import bpy
 import numpy as np
 
 from ..artgs_addon import preferences
-from ..artgs_addon.armature import build_armature
+from ..artgs_addon.armature import armature_name, build_armature
 from ..artgs_addon.pointcloud import points_modifier_last
+from ..artgs_addon.splat_preview import splat_preview_in
 from ..artgs_addon.worker import WorkerResult
 from ..core import outdir
 from ..core.joints import Articulation, read_articulation
@@ -73,9 +74,11 @@ class ARTGS_OT_propose_bones(WorkerOperator, bpy.types.Operator):
     def finish(self, context: bpy.types.Context, result: WorkerResult) -> str:
         settings = context.scene.artgs
         articulation = read_articulation(settings.output_path / outdir.PROPOSALS)
-        preview = settings.splat_object
+        preview = splat_preview_in(settings.output_path, settings.splat_object)
         arm = build_armature(context, articulation, preview=preview,
-                             size=object_size(preview, articulation))
+                             size=object_size(preview, articulation),
+                             name=armature_name(settings.capture_path, settings.output_path),
+                             output=settings.output_path)
         if preview is not None:
             points_modifier_last(preview)
         kinds = ", ".join(f"{j.name} ({j.type})" for j in articulation.joints)

@@ -8,7 +8,7 @@ import bpy
 from bpy.props import IntProperty, StringProperty
 
 from ..artgs_addon import preferences
-from ..artgs_addon.splat_preview import build_splat_preview
+from ..artgs_addon.splat_preview import build_splat_preview, splat_preview_in
 from ..artgs_addon.worker import WorkerResult
 from ..core import outdir
 from ..core.errors import ArtgsError
@@ -17,10 +17,11 @@ from .capture import preview_cap
 
 
 def load_splat_preview(context: bpy.types.Context, path: Path) -> str:
-    """Replace the scene's splat preview with one of ``path``; returns the key figures."""
+    """Show ``path`` as the scene's splat preview, replacing the preview of a PLY in the same
+    folder (previews of other output folders stay); returns the key figures."""
     settings = context.scene.artgs
+    old = splat_preview_in(path.parent, settings.splat_object)
     built = build_splat_preview(context, path, preview_cap(context))
-    old = settings.splat_object
     if old is not None:
         mesh = old.data
         bpy.data.objects.remove(old)

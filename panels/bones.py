@@ -1,10 +1,12 @@
-"""The Bones panel: propose joints, list them, edit the active one, add/remove/save."""
+"""The Bones panel: propose joints (with the stage's state), list the joints of the output folder's
+armature, edit the active one, add/remove/save."""
 
 from __future__ import annotations
 
 import bpy
 
 from ..artgs_addon.armature import find_armature
+from .pipeline import draw_state
 
 ICONS = {"revolute": "ORIENTATION_GIMBAL", "prismatic": "EMPTY_SINGLE_ARROW"}
 
@@ -25,6 +27,7 @@ class ARTGS_PT_bones(bpy.types.Panel):
             row = layout.row(align=True)
             row.prop(settings, "proposal_method", text="")
             row.operator("artgs.propose_bones", icon="BONE_DATA")
+            draw_state(layout, settings.bones)
         row = layout.row(align=True)
         row.operator("artgs.add_joint", icon="ADD", text="Add")
         row.operator("artgs.remove_joint", icon="REMOVE", text="Remove")
@@ -34,6 +37,7 @@ class ARTGS_PT_bones(bpy.types.Panel):
         if obj is None:
             layout.label(text="No joints yet: propose or add one", icon="INFO")
             return
+        layout.label(text=obj.name, icon="ARMATURE_DATA")
         bones = obj.data.edit_bones if obj.mode == "EDIT" else obj.data.bones
         col = layout.column(align=True)
         for bone in bones:

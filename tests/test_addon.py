@@ -1,5 +1,6 @@
-"""The add-on in bpy (background): registration, preferences, polls, Import Capture (cameras
-reproduce K, point count), Import Splat (count, colours), engine failures leave the scene as it was.
+"""The add-on in bpy (background): registration, preferences, polls, Import Capture through the
+engine (cameras reproduce K, point count), Import Splat (count, colours), engine failures leave the
+scene as it was, two objects in one scene (one armature each).
 
 The whole pipeline through the operators runs in tests/test_addon_pipeline.py (a subprocess).
 """
@@ -8,6 +9,8 @@ from __future__ import annotations
 
 import json
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,11 +19,13 @@ bpy = pytest.importorskip("bpy")
 import addon_utils  # noqa: E402
 
 from artgs.artgs_addon import preferences  # noqa: E402
+from artgs.artgs_addon.armature import find_armature  # noqa: E402
 from artgs.artgs_addon.capture_scene import camera_object, pixel_aspect  # noqa: E402
 from artgs.artgs_addon.pointcloud import srgb_to_linear  # noqa: E402
 from artgs.artgs_addon.splat_preview import SH_C0  # noqa: E402
 from artgs.core.cameras import Camera, intrinsics, look_at  # noqa: E402
 from artgs.core.capture import load_capture  # noqa: E402
+from artgs.core.joints import read_articulation  # noqa: E402
 from artgs.core.ply import SplatArrays, write_ply  # noqa: E402
 from artgs.core.synth import generate_object  # noqa: E402
 from artgs.operators.propose import ARTGS_OT_propose_bones  # noqa: E402
@@ -275,15 +280,87 @@ def test_engine_failure_reports_and_leaves_scene(scene, tmp_path, capture):
     assert _scene_state() == before and scene.artgs.splat_object is None
 
 
-def test_failing_capture_import_leaves_scene(scene, tmp_path):
+def _preview_dirs() -> set[str]:
+    return {p.name for p in Path(tempfile.gettempdir()).glob("artgs-capture-*")}
+
+
+def test_failing_capture_import_leaves_scene(scene, tmp_path, capture):
     bad = tmp_path / "bad"
     bad.mkdir()
     (bad / "transforms.json").write_text("{not json")
     scene.artgs.capture_dir = str(bad)
-    before = _scene_state()
+    before, temporary = _scene_state(), _preview_dirs()
     with pytest.raises(RuntimeError, match="transforms.json"):
         bpy.ops.artgs.import_capture()
     assert scene.artgs.capture.status == "FAILED" and _scene_state() == before
+
+    # A bad field of one frame: the engine's message names the file, the frame and the field.
+    tj = json.loads((capture / "transforms.json").read_text())
+    tj["frames"][1]["fl_x"] = -5
+    (bad / "transforms.json").write_text(json.dumps(tj))
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.artgs.import_capture()
+    message = scene.artgs.capture.message
+    assert message.startswith(f"{bad / 'transforms.json'}, frame 1 ")
+    assert "field 'fl_x'" in message and message in str(err.value)
+    assert "Traceback" not in str(err.value)
+    assert scene.artgs.capture.status == "FAILED" and _scene_state() == before
+    assert _preview_dirs() == temporary  # the temporary preview folder is gone
+
+
+def _run(op, **kwargs) -> None:
+    assert op(**kwargs) == {"FINISHED"}
+
+
+def test_two_objects_in_one_scene_get_two_armatures(scene, tmp_path, capture):
+    """Each object's joints live in their own armature, tied to its output folder: Propose Bones
+    rebuilds only that one, Save Joints writes only that one, the previews stay apart."""
+    drawer = generate_object(tmp_path / "drawer", "drawer", 1, width=64, height=48,
+                             static_views=4, steps=2)
+    settings = scene.artgs
+    outs = {"cabinet": tmp_path / "out_cabinet", "drawer": tmp_path / "out_drawer"}
+    for name, cap in (("cabinet", capture), ("drawer", drawer)):
+        settings.capture_dir, settings.output_dir = str(cap), str(outs[name])
+        _run(bpy.ops.artgs.import_capture)
+        _run(bpy.ops.artgs.reconstruct, iterations=2)
+        _run(bpy.ops.artgs.propose_bones)
+        assert settings.bones.status == "DONE"
+    arms = {o.name: o for o in bpy.data.objects if o.type == "ARMATURE"}
+    assert sorted(arms) == ["ArtGS Joints cabinet", "ArtGS Joints drawer"]
+    for name, out in outs.items():
+        arm = arms[f"ArtGS Joints {name}"]
+        assert arm["artgs_output"] == str(out.resolve())
+        joints = read_articulation(out / "proposals.json").joints
+        assert joints and sorted(b.name for b in arm.data.bones) == sorted(j.name for j in joints)
+        previews = [o for o in bpy.data.objects if o.type == "MESH" and o.parent == arm]
+        assert [Path(o["artgs_splat"]) for o in previews] == [(out / "splat.ply").resolve()]
+        assert previews[0].modifiers["ArtGS Joints"].object == arm
+
+    # The current output folder picks the armature, whichever object is active.
+    cabinet, drawer_arm = arms["ArtGS Joints cabinet"], arms["ArtGS Joints drawer"]
+    settings.output_dir = str(outs["cabinet"])
+    bpy.context.view_layer.objects.active = drawer_arm
+    assert find_armature(bpy.context) == cabinet
+    drawer_file = (outs["drawer"] / "proposals.json").read_bytes()
+    bone = cabinet.data.bones[0]
+    bone.artgs_joint.upper = bone.artgs_joint.upper * 0.5
+    _run(bpy.ops.artgs.save_joints)
+    saved = {j.name: j for j in read_articulation(outs["cabinet"] / "proposals.json").joints}
+    assert saved[bone.name].source == "user"
+    assert saved[bone.name].limit[1] == pytest.approx(bone.artgs_joint.upper, rel=1e-6)
+    assert (outs["drawer"] / "proposals.json").read_bytes() == drawer_file
+
+    # Proposing again for the drawer rebuilds the drawer's armature in place.
+    settings.capture_dir, settings.output_dir = str(drawer), str(outs["drawer"])
+    assert find_armature(bpy.context) == drawer_arm
+    _run(bpy.ops.artgs.propose_bones)
+    assert sorted(o.name for o in bpy.data.objects if o.type == "ARMATURE") == sorted(arms)
+    assert saved[bone.name].limit[1] == pytest.approx(cabinet.data.bones[0].artgs_joint.upper)
+
+    # An output folder without an armature gets none of the others'.
+    settings.output_dir = str(tmp_path / "out_new")
+    assert find_armature(bpy.context) is None
+    assert not bpy.ops.artgs.save_joints.poll()
 
 
 def test_vlm_refused_without_online_access(scene, tmp_path, capture):

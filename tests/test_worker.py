@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import stat
 import sys
 import time
@@ -83,6 +84,43 @@ def test_cancel_ends_the_process(tmp_path):
     assert not w.running and result.cancelled and not result.ok
     assert result.returncode == CANCELLED  # the engine's SIGTERM handler ran (not a kill)
     assert result.error == "cancelled"
+
+
+def _handles_sigterm(pid: int) -> bool:
+    """Whether process ``pid`` has installed a SIGTERM handler (Linux: SigCgt in /proc)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigCgt:"):
+            return bool(int(line.split()[1], 16) >> (signal.SIGTERM - 1) & 1)
+    return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").is_file(), reason="needs Linux /proc")
+@pytest.mark.parametrize("when", ["starting", "importing"])
+def test_cancel_while_the_engine_starts_or_imports(tmp_path, when):
+    """Cancel before the engine's SIGTERM handler exists (Python still starting: killed by the
+    signal) and after it, while the stage's modules (torch ...) are imported (exit 130): both
+    end cancelled, never as an engine error."""
+    w = Worker(ENGINE, "reconstruct", [tmp_path / "out", "--capture", tmp_path / "none"]).start()
+    if when == "importing":
+        deadline = time.monotonic() + 60
+        while not _handles_sigterm(w.pid):
+            assert w._proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.002)
+    w.cancel()
+    result = w.wait(timeout=30)
+    # the capture would have been refused (exit 2) had the engine got past its imports
+    assert result.returncode == (-signal.SIGTERM if when == "starting" else CANCELLED)
+    assert result.cancelled and not result.ok and result.error == "cancelled"
+    assert not (tmp_path / "out").exists()
+
+
+def test_cancel_after_the_end_keeps_the_outcome(tmp_path):
+    w = Worker(ENGINE, "validate", [tmp_path / "none"]).start()
+    w.wait(timeout=60)
+    w.cancel()  # too late: the engine had already refused the capture
+    result = w.result
+    assert result.returncode == 2 and not result.cancelled
+    assert result.error.startswith(str(tmp_path / "none"))
 
 
 def test_check_env_reports_versions_and_missing(monkeypatch, capsys):
