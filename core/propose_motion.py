@@ -42,8 +42,8 @@ from .cameras import Camera
 from .capture import Capture, Frame
 from .joints import Joint, joint_transform, rotation_about_axis
 from .progress import QUIET, Progress
-from .rigid import (StepData, apply, fit_joint, icp, make_transform, refine_joint, rotation_log,
-                    tukey_weights)
+from .rigid import (StepData, apply, fit_joint, icp, invert, make_transform, refine_joint,
+                    rotation_log, tukey_weights)
 
 
 #: The interaction time at which every part is closed (a camera's frame at this time, if it has
@@ -539,7 +539,7 @@ class Track:
 def _jump(T: np.ndarray, predicted: np.ndarray, points: np.ndarray) -> float:
     """How far pose ``T`` departs from the constant-velocity prediction beyond what a step's
     change of speed explains (0 within 25 degrees and 10 cm of it)."""
-    D = T @ np.linalg.inv(predicted)
+    D = T @ invert(predicted)
     angle = math.degrees(rotation_log(D[:3, :3])[1])
     c = points.mean(axis=0, keepdims=True)
     shift = float(np.linalg.norm(apply(T, c) - apply(predicted, c)))
@@ -574,7 +574,7 @@ def track_part(points: np.ndarray, views: list[View], times: list[int], start: i
         hyps = [base]
         predicted = None
         if len(prev) >= 2 and t > start:
-            predicted = base @ np.linalg.inv(prev[-2]) @ base
+            predicted = base @ invert(prev[-2]) @ base
             hyps.append(predicted)
         hyps += prev[:-1]   # the part may go back through earlier poses (closing)
         hyps += [H @ base for H in first_move_hypotheses(apply(base, points))]
@@ -596,7 +596,7 @@ def track_part(points: np.ndarray, views: list[View], times: list[int], start: i
         Ts[t], score[t], rms[t] = T, s, rms_t
         prev.append(T)
         if s > config.grow_score and moved.any():
-            back = apply(np.linalg.inv(T), P[moved])
+            back = apply(invert(T), P[moved])
             rel = back - centre
             local = rel @ axes.T
             depth = rel @ front
@@ -834,7 +834,7 @@ def _part_points(S: np.ndarray, fit, transforms: dict[int, np.ndarray], clouds) 
         P, _, _, moved = clouds[t]
         if np.allclose(T, np.eye(4), atol=1e-4) or not moved.any():
             continue
-        back = apply(np.linalg.inv(T), P[moved])
+        back = apply(invert(T), P[moved])
         local = (back - c) @ axes.T
         margin = 0.02
         inside = np.all(np.abs(local[:, 1:]) <= half[1:] + margin, axis=1)

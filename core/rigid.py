@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+import scipy.linalg
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 from scipy.spatial import cKDTree
@@ -24,6 +25,12 @@ def make_transform(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     T[:3, :3] = R
     T[:3, 3] = t
     return T
+
+
+def invert(T: np.ndarray) -> np.ndarray:
+    """Inverse of a 4x4 rigid transform."""
+    R = T[:3, :3]
+    return make_transform(R.T, -R.T @ T[:3, 3])
 
 
 def apply(T: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -156,9 +163,9 @@ def icp(source: np.ndarray, target: np.ndarray, target_normals: np.ndarray, T0: 
                 J = np.concatenate([np.cross(p, e), np.broadcast_to(e, p.shape)], axis=1)
                 A += (J * pw[:, None]).T @ J
                 b -= (J * pw[:, None]).T @ diff[:, k]
-        try:
-            xi = np.linalg.solve(A + 1e-9 * np.eye(6), b)
-        except np.linalg.LinAlgError:
+        try:   # scipy: numpy's small dense solve is slow once torch is loaded (threading)
+            xi = scipy.linalg.solve(A + 1e-9 * np.eye(6), b, assume_a="pos")
+        except (np.linalg.LinAlgError, ValueError):
             break
         T = make_transform(np.eye(3), c) @ _se3_exp(xi) @ make_transform(np.eye(3), -c) @ T
         cutoff = max(min(cutoff, 2.0 * float(np.percentile(r_pt[good], 90))), 2.0 * min_distance)
