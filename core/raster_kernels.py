@@ -1,7 +1,8 @@
 """numba kernels for CPU Gaussian compositing: tile binning, blend forward and hand-written backward.
 
 Inputs are float32 arrays of the visible Gaussians already in front-to-back order; one row of
-``feats`` (M, 10) is ``mean_x, mean_y, conic_a, conic_b, conic_c, opacity, r, g, b, depth``.
+``feats`` (M, 12) is ``mean_x, mean_y, conic_a, conic_b, conic_c, opacity, r, g, b, depth,
+slope_x, slope_y`` (planar depth ``depth + slope . (p - mean)`` at pixel p).
 Binning keeps that order inside every tile list (count, prefix sum, fill), so no per-tile sort.
 The model is the one of core/raster_reference.py (its docstring lists the rules).
 
@@ -21,7 +22,7 @@ from numba import njit, prange
 
 from . import raster_model as model
 
-NF = 10  # floats per Gaussian in ``feats`` and its gradient
+NF = 12  # floats per Gaussian in ``feats`` and its gradient
 TILE_W, TILE_H = 4, 4  # pixels per tile; the blend loops vectorise over its TILE_W * TILE_H pixels
 NPIX = TILE_W * TILE_H
 f32 = np.float32
@@ -89,7 +90,7 @@ def depth_order(depths, candidates):
 
 @njit(cache=True)
 def sort_visible(proj, extent, visible):
-    """The visible rows of ``proj`` (N,10) front to back: (order, feats (M,10), extent (M,2))."""
+    """The visible rows of ``proj`` (N,12) front to back: (order, feats (M,12), extent (M,2))."""
     order = depth_order(np.ascontiguousarray(proj[:, 9]), np.flatnonzero(visible))
     feats = np.empty((order.shape[0], NF), np.float32)
     ext = np.empty((order.shape[0], 2), np.float32)
@@ -165,6 +166,7 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
             g = ids[k]
             mx, my, ca, cb, cc = feats[g, 0], feats[g, 1], feats[g, 2], feats[g, 3], feats[g, 4]
             op, cr, cg, cbl, dep = feats[g, 5], feats[g, 6], feats[g, 7], feats[g, 8], feats[g, 9]
+            su, sv = feats[g, 10], feats[g, 11]
             kk = np.int32(k - start + 1)
             stops = 0
             for p in range(NPIX):
@@ -181,7 +183,7 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
                 acc[0, p] += w * cr
                 acc[1, p] += w * cg
                 acc[2, p] += w * cbl
-                acc[3, p] += w * dep
+                acc[3, p] += w * (dep + su * dx + sv * dy)
                 T[p] = next_T if take else (-Tp if stop else Tp)
                 last[p] = kk if take else last[p]
                 stops += 1 if stop else 0
@@ -227,7 +229,8 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
             g = ids[start + kk]
             mx, my, ca, cb, cc = feats[g, 0], feats[g, 1], feats[g, 2], feats[g, 3], feats[g, 4]
             op, cr, cg, cbl, dep = feats[g, 5], feats[g, 6], feats[g, 7], feats[g, 8], feats[g, 9]
-            s_r = s_g = s_b = s_d = s_h = s_x = s_y = s_xx = s_xy = s_yy = _ZERO
+            su, sv = feats[g, 10], feats[g, 11]
+            s_r = s_g = s_b = s_d = s_du = s_dv = s_h = s_x = s_y = s_xx = s_xy = s_yy = _ZERO
             for p in range(NPIX):
                 dx = px[p] - mx
                 dy = py[p] - my
@@ -243,8 +246,12 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
                 s_r += w * gr
                 s_g += w * gg
                 s_b += w * gb
-                s_d += w * gd
-                d_r, d_g, d_b, d_d = cr - rest[0, p], cg - rest[1, p], cbl - rest[2, p], dep - rest[3, p]
+                wd = w * gd
+                s_d += wd
+                s_du += wd * dx
+                s_dv += wd * dy
+                dep_p = dep + su * dx + sv * dy
+                d_r, d_g, d_b, d_d = cr - rest[0, p], cg - rest[1, p], cbl - rest[2, p], dep_p - rest[3, p]
                 g_alpha = Tb * (gr * d_r + gg * d_g + gb * d_b + gd * d_d) + gpix[4, p] * inv
                 # h = d alpha/d power * dL/d alpha / (-opacity); zero where alpha is clamped
                 h = gauss * g_alpha if valid & (raw <= ALPHA_MAX) else _ZERO
@@ -260,8 +267,8 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
                 rest[1, p] += a_v * d_g
                 rest[2, p] += a_v * d_b
                 rest[3, p] += a_v * d_d
-            buf[g, 0] += op * (ca * s_x + cb * s_y)
-            buf[g, 1] += op * (cb * s_x + cc * s_y)
+            buf[g, 0] += op * (ca * s_x + cb * s_y) - su * s_d
+            buf[g, 1] += op * (cb * s_x + cc * s_y) - sv * s_d
             buf[g, 2] -= _HALF * op * s_xx
             buf[g, 3] -= op * s_xy
             buf[g, 4] -= _HALF * op * s_yy
@@ -270,6 +277,8 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
             buf[g, 7] += s_g
             buf[g, 8] += s_b
             buf[g, 9] += s_d
+            buf[g, 10] += s_du
+            buf[g, 11] += s_dv
 
 
 @njit(cache=True)

@@ -9,6 +9,12 @@
 - ``alpha = min(ALPHA_MAX, opacity * exp(-power))``; pairs with ``alpha < ALPHA_MIN`` are
   skipped; compositing stops before the first Gaussian that would bring the transmittance
   below ``T_MIN``.
+- Depth is planar per Gaussian: at pixel p it contributes the depth of its max-density point
+  along p's ray, linearised about its projected mean m: ``z + a . (p - m)``. With the camera-frame
+  mean t (z = t_z) and covariance Sigma, ``a = -z^2 (Sigma^-1 t)_{x,y} / (t^T Sigma^-1 t (fx, fy))``
+  (the ray-intersection depth ``r^T Sigma^-1 t / r^T Sigma^-1 r``, r = ((u-cx)/fx, (v-cy)/fy, 1),
+  differentiated at r = t / z); each component of ``a`` is limited to ``MAX_SLOPE`` pixel
+  footprints (z / f) per pixel (a disc seen edge-on). A flat disc thus renders its plane's depth.
 """
 
 NEAR_PLANE = 0.01
@@ -19,3 +25,4 @@ POWER_CUTOFF = 0.5 * SIGMA_CUTOFF ** 2
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
+MAX_SLOPE = 3.0

@@ -7,6 +7,9 @@ evaluated at ``t`` whose x/z, y/z are clamped to 1.3x the field of view (as gspl
 conic is the inverse 2D covariance. A Gaussian touches pixel centre ``p`` only inside its 3 sigma
 ellipse (``power = 0.5 d^T conic d <= 4.5``, d = p - mean2d); ``extent`` holds the half sizes
 of the ellipse's axis-aligned bounding box, ``3 sqrt(cov2d_xx)``, ``3 sqrt(cov2d_yy)``.
+``slopes`` are the planar depth's change per pixel (core/raster_model.py): with ``M = W R`` and
+``b = M^T t`` (the mean in the Gaussian's own frame), ``Sigma^-1 t = M (b / s^2)`` and
+``t^T Sigma^-1 t = sum(b^2 / s^2)``, so no 3x3 inverse is needed.
 """
 
 from __future__ import annotations
@@ -16,9 +19,7 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-from .raster_model import FOV_PAD, LOW_PASS, NEAR_PLANE, SIGMA_CUTOFF
-
-
+from .raster_model import FOV_PAD, LOW_PASS, MAX_SLOPE, NEAR_PLANE, SIGMA_CUTOFF
 
 class Projected(NamedTuple):
     """Per-Gaussian screen-space quantities (N rows each)."""
@@ -26,6 +27,7 @@ class Projected(NamedTuple):
     means2d: torch.Tensor   # (N,2) pixel coordinates
     conics: torch.Tensor    # (N,3) inverse 2D covariance (a, b, c): [[a, b], [b, c]]
     depths: torch.Tensor    # (N,) camera z
+    slopes: torch.Tensor    # (N,2) planar depth change per pixel in x and y
     extent: torch.Tensor    # (N,2) half sizes of the 3 sigma box (no gradient)
     visible: torch.Tensor   # (N,) bool: in front of the near plane and overlapping the image
 
@@ -69,7 +71,8 @@ def project(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
     zero = torch.zeros_like(z)
     J = torch.stack([fx / z, zero, -fx * tx / (z * z),
                      zero, fy / z, -fy * ty / (z * z)], dim=-1).reshape(-1, 2, 3)
-    M = quat_to_rotmat(quats) * torch.exp(log_scales)[:, None, :]   # R S
+    R = quat_to_rotmat(quats)
+    M = R * torch.exp(log_scales)[:, None, :]   # R S
     T = J @ Rw @ M                                                  # (N,2,3)
     cov = T @ T.transpose(1, 2)
     ca = cov[:, 0, 0] + LOW_PASS
@@ -80,10 +83,30 @@ def project(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
     det = torch.where(ok, det, torch.ones_like(det))
     conics = torch.stack([cc / det, -cb / det, ca / det], dim=-1)
     means2d = torch.stack([fx * x / z + cx, fy * y / z + cy], dim=-1)
+    slopes = depth_slopes(Rw @ R, torch.stack([x, y, z], -1), log_scales, fx, fy)
 
     with torch.no_grad():
         extent = SIGMA_CUTOFF * torch.stack([ca, cc], dim=-1).clamp_min(0).sqrt()
         lo, hi = means2d - extent, means2d + extent
         on_screen = (hi[:, 0] > 0) & (lo[:, 0] < width) & (hi[:, 1] > 0) & (lo[:, 1] < height)
         visible = ok & on_screen & torch.isfinite(means2d).all(-1) & torch.isfinite(extent).all(-1)
-    return Projected(means2d, conics, torch.where(in_front, t[:, 2], zero), extent, visible)
+    return Projected(means2d, conics, torch.where(in_front, t[:, 2], zero),
+                     torch.where(in_front[:, None], slopes, torch.zeros_like(slopes)), extent,
+                     visible)
+
+
+def depth_slopes(M: torch.Tensor, t: torch.Tensor, log_scales: torch.Tensor, fx, fy
+                 ) -> torch.Tensor:
+    """Planar depth change per pixel (N,2) of Gaussians with camera-from-local rotations ``M``
+    (N,3,3), camera-frame means ``t`` (N,3) (z > 0) and ``log_scales`` (see the module doc)."""
+    b = (M.transpose(1, 2) @ t[:, :, None])[:, :, 0]
+    e = b * torch.exp(-2.0 * log_scales)
+    c = (M @ e[:, :, None])[:, :, 0]
+    q = (b * e).sum(-1)
+    z = t[:, 2]
+    out = []
+    for col, f in ((c[:, 0], fx), (c[:, 1], fy)):
+        a = -z * z * col / (q * f)
+        lim = MAX_SLOPE * z / f
+        out.append(torch.where(a > lim, lim, torch.where(a < -lim, -lim, a)))
+    return torch.stack(out, -1)

@@ -3,7 +3,7 @@
 Same model as core/raster_project.py (the torch version the reference renderer differentiates
 by autograd; the tests compare the two). ``cam`` is float32 ``[fx, fy, cx, cy, R (9, row-major),
 t (3)]`` of the OpenCV world-to-camera transform. Output rows are the blend kernels' ``feats``
-layout (``mean_x, mean_y, conic a, b, c, opacity, r, g, b, depth``).
+layout (``mean_x, mean_y, conic a, b, c, opacity, r, g, b, depth, slope_x, slope_y``).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ LOW_PASS = f32(model.LOW_PASS)
 SIGMA = f32(model.SIGMA_CUTOFF)
 _ZERO, _ONE, _TWO = f32(0.0), f32(1.0), f32(2.0)
 _FOV_PAD = f32(model.FOV_PAD)
+MAX_SLOPE = f32(model.MAX_SLOPE)
 
 
 @njit(fastmath=True, cache=True)
@@ -57,6 +58,72 @@ def _column_backward(cam, R, s, j, j00, j02, j11, j12, g_a, g_b, g_c):
 
 
 @njit(fastmath=True, cache=True)
+def _camera_rotation(cam, R):
+    """M = W R, the camera-from-Gaussian rotation (row-major 9-tuple)."""
+    return (cam[4] * R[0] + cam[5] * R[3] + cam[6] * R[6], cam[4] * R[1] + cam[5] * R[4] + cam[6] * R[7], cam[4] * R[2] + cam[5] * R[5] + cam[6] * R[8],
+         cam[7] * R[0] + cam[8] * R[3] + cam[9] * R[6], cam[7] * R[1] + cam[8] * R[4] + cam[9] * R[7], cam[7] * R[2] + cam[8] * R[5] + cam[9] * R[8],
+         cam[10] * R[0] + cam[11] * R[3] + cam[12] * R[6], cam[10] * R[1] + cam[11] * R[4] + cam[12] * R[7], cam[10] * R[2] + cam[11] * R[5] + cam[12] * R[8])
+
+
+@njit(fastmath=True, cache=True)
+def _slope_terms(M, x, y, z, log_scales):
+    """b = M^T t, e = b / s^2, c = M e (x, y rows) and q = b . e of the planar depth slopes."""
+    b0 = M[0] * x + M[3] * y + M[6] * z
+    b1 = M[1] * x + M[4] * y + M[7] * z
+    b2 = M[2] * x + M[5] * y + M[8] * z
+    i0, i1, i2 = (np.exp(-_TWO * log_scales[0]), np.exp(-_TWO * log_scales[1]),
+                  np.exp(-_TWO * log_scales[2]))
+    e0, e1, e2 = b0 * i0, b1 * i1, b2 * i2
+    q = b0 * e0 + b1 * e1 + b2 * e2
+    cx = M[0] * e0 + M[1] * e1 + M[2] * e2
+    cy = M[3] * e0 + M[4] * e1 + M[5] * e2
+    return (b0, b1, b2), (e0, e1, e2), (i0, i1, i2), cx, cy, q
+
+
+@njit(fastmath=True, cache=True)
+def _slopes(cam, M, x, y, z, log_scales):
+    """Planar depth change per pixel (x, y), limited to MAX_SLOPE footprints (raster_model)."""
+    _, _, _, cx, cy, q = _slope_terms(M, x, y, z, log_scales)
+    lim_u, lim_v = MAX_SLOPE * z / cam[0], MAX_SLOPE * z / cam[1]
+    a_u, a_v = -z * z * cx / (q * cam[0]), -z * z * cy / (q * cam[1])
+    return min(max(a_u, -lim_u), lim_u), min(max(a_v, -lim_v), lim_v)
+
+
+@njit(fastmath=True, cache=True)
+def _slope_backward(c, f, z, q, g):
+    """Gradients (z, q, c) of one slope ``-z^2 c / (q f)`` limited to +-MAX_SLOPE z / f, from g."""
+    a = -z * z * c / (q * f)
+    lim = MAX_SLOPE * z / f
+    if a > lim:
+        return MAX_SLOPE / f * g, _ZERO, _ZERO
+    if a < -lim:
+        return -MAX_SLOPE / f * g, _ZERO, _ZERO
+    return _TWO * a / z * g, -a / q * g, -z * z / (q * f) * g
+
+
+@njit(fastmath=True, cache=True)
+def _slopes_backward(cam, M, x, y, z, log_scales, g_u, g_v):
+    """Backward of :func:`_slopes`: gradients of (x, y, z), log_scales (3) and M (9, row-major)."""
+    b, e, inv, cx, cy, q = _slope_terms(M, x, y, z, log_scales)
+    gz_u, gq_u, g_cx = _slope_backward(cx, cam[0], z, q, g_u)
+    gz_v, gq_v, g_cy = _slope_backward(cy, cam[1], z, q, g_v)
+    g_z, g_q = gz_u + gz_v, gq_u + gq_v
+    # c = M e (rows x, y); q = b . e; e = b * inv; b = M^T t
+    ge = (M[0] * g_cx + M[3] * g_cy, M[1] * g_cx + M[4] * g_cy, M[2] * g_cx + M[5] * g_cy)
+    gb = (_TWO * g_q * e[0] + ge[0] * inv[0], _TWO * g_q * e[1] + ge[1] * inv[1],
+          _TWO * g_q * e[2] + ge[2] * inv[2])
+    g_ls = (-_TWO * e[0] * (g_q * b[0] + ge[0]), -_TWO * e[1] * (g_q * b[1] + ge[1]),
+            -_TWO * e[2] * (g_q * b[2] + ge[2]))
+    g_x = M[0] * gb[0] + M[1] * gb[1] + M[2] * gb[2]
+    g_y = M[3] * gb[0] + M[4] * gb[1] + M[5] * gb[2]
+    g_z += M[6] * gb[0] + M[7] * gb[1] + M[8] * gb[2]
+    g_M = (g_cx * e[0] + x * gb[0], g_cx * e[1] + x * gb[1], g_cx * e[2] + x * gb[2],
+           g_cy * e[0] + y * gb[0], g_cy * e[1] + y * gb[1], g_cy * e[2] + y * gb[2],
+           z * gb[0], z * gb[1], z * gb[2])
+    return g_x, g_y, g_z, g_ls, g_M
+
+
+@njit(fastmath=True, cache=True)
 def _limits(cam, width, height):
     fx, fy, cx, cy = cam[0], cam[1], cam[2], cam[3]
     tan_x, tan_y = f32(0.5) * width / fx, f32(0.5) * height / fy
@@ -67,7 +134,7 @@ def _limits(cam, width, height):
 @njit(parallel=True, fastmath=True, cache=True)
 def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width, height, near,
                     out, extent, visible):
-    """Fill ``out`` (N,10), ``extent`` (N,2) and ``visible`` (N,) for every Gaussian."""
+    """Fill ``out`` (N,12), ``extent`` (N,2) and ``visible`` (N,) for every Gaussian."""
     fx, fy, cx, cy = cam[0], cam[1], cam[2], cam[3]
     lxp, lxn, lyp, lyn = _limits(cam, width, height)
     for n in prange(means.shape[0]):
@@ -106,13 +173,14 @@ def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width
         out[n, 5] = _ONE / (_ONE + np.exp(-opacity_logits[n]))
         out[n, 6], out[n, 7], out[n, 8] = colors[n, 0], colors[n, 1], colors[n, 2]
         out[n, 9] = z
+        out[n, 10], out[n, 11] = _slopes(cam, _camera_rotation(cam, R), x, y, z, log_scales[n])
         extent[n, 0], extent[n, 1] = ex, ey
 
 
 @njit(parallel=True, fastmath=True, cache=True)
 def project_backward(means, quats, log_scales, cam, width, height, feats, visible, grad,
                      g_means, g_quats, g_log_scales, g_logits, g_colors):
-    """Gradients of the Gaussian parameters from ``grad`` (N,10), the gradient of ``feats``."""
+    """Gradients of the Gaussian parameters from ``grad`` (N,12), the gradient of ``feats``."""
     fx, fy = cam[0], cam[1]
     lxp, lxn, lyp, lyn = _limits(cam, width, height)
     for n in prange(means.shape[0]):
@@ -150,9 +218,24 @@ def project_backward(means, quats, log_scales, cam, width, height, feats, visibl
         gj00, gj02 = c0[4] + c1[4] + c2[4], c0[5] + c1[5] + c2[5]
         gj11, gj12 = c0[6] + c1[6] + c2[6], c0[7] + c1[7] + c2[7]
 
-        g_z = grad[n, 9]
-        g_x = fx / z * grad[n, 0]
-        g_y = fy / z * grad[n, 1]
+        M = _camera_rotation(cam, R)
+        g_x, g_y, g_z, s_ls, s_M = _slopes_backward(cam, M, x, y, z, log_scales[n],
+                                                    grad[n, 10], grad[n, 11])
+        for j in range(3):
+            g_log_scales[n, j] += s_ls[j]
+        # M = W R  ->  dL/dR = W^T dL/dM
+        sR = (cam[4] * s_M[0] + cam[7] * s_M[3] + cam[10] * s_M[6],
+              cam[4] * s_M[1] + cam[7] * s_M[4] + cam[10] * s_M[7],
+              cam[4] * s_M[2] + cam[7] * s_M[5] + cam[10] * s_M[8],
+              cam[5] * s_M[0] + cam[8] * s_M[3] + cam[11] * s_M[6],
+              cam[5] * s_M[1] + cam[8] * s_M[4] + cam[11] * s_M[7],
+              cam[5] * s_M[2] + cam[8] * s_M[5] + cam[11] * s_M[8],
+              cam[6] * s_M[0] + cam[9] * s_M[3] + cam[12] * s_M[6],
+              cam[6] * s_M[1] + cam[9] * s_M[4] + cam[12] * s_M[7],
+              cam[6] * s_M[2] + cam[9] * s_M[5] + cam[12] * s_M[8])
+        g_z += grad[n, 9]
+        g_x += fx / z * grad[n, 0]
+        g_y += fy / z * grad[n, 1]
         g_z -= fx * x / (z * z) * grad[n, 0] + fy * y / (z * z) * grad[n, 1]
         z2 = z * z
         g_z += -fx / z2 * gj00 + _TWO * fx * txc / (z2 * z) * gj02
@@ -169,14 +252,17 @@ def project_backward(means, quats, log_scales, cam, width, height, feats, visibl
         for i in range(3):   # t = W p + w  ->  dL/dp = W^T dL/dt
             g_means[n, i] = cam[4 + i] * g_x + cam[7 + i] * g_y + cam[10 + i] * g_z
 
-        # gR[i][j] = c_j[i]
-        gw = _TWO * (-qz * c1[0] + qy * c2[0] + qz * c0[1] - qx * c2[1] - qy * c0[2] + qx * c1[2])
-        gx = _TWO * (qy * c1[0] + qz * c2[0] + qy * c0[1] - _TWO * qx * c1[1] - w * c2[1]
-                     + qz * c0[2] + w * c1[2] - _TWO * qx * c2[2])
-        gy = _TWO * (-_TWO * qy * c0[0] + qx * c1[0] + w * c2[0] + qx * c0[1] + qz * c2[1]
-                     - w * c0[2] + qz * c1[2] - _TWO * qy * c2[2])
-        gz = _TWO * (-_TWO * qz * c0[0] - w * c1[0] + qx * c2[0] + w * c0[1] - _TWO * qz * c1[1]
-                     + qy * c2[1] + qx * c0[2] + qy * c1[2])
+        # gR[i][j] = c_j[i] (from the conic) + sR[3 i + j] (from the slopes)
+        g00, g01, g02 = c0[0] + sR[0], c1[0] + sR[1], c2[0] + sR[2]
+        g10, g11, g12 = c0[1] + sR[3], c1[1] + sR[4], c2[1] + sR[5]
+        g20, g21, g22 = c0[2] + sR[6], c1[2] + sR[7], c2[2] + sR[8]
+        gw = _TWO * (-qz * g01 + qy * g02 + qz * g10 - qx * g12 - qy * g20 + qx * g21)
+        gx = _TWO * (qy * g01 + qz * g02 + qy * g10 - _TWO * qx * g11 - w * g12
+                     + qz * g20 + w * g21 - _TWO * qx * g22)
+        gy = _TWO * (-_TWO * qy * g00 + qx * g01 + w * g02 + qx * g10 + qz * g12
+                     - w * g20 + qz * g21 - _TWO * qy * g22)
+        gz = _TWO * (-_TWO * qz * g00 - w * g01 + qx * g02 + w * g10 - _TWO * qz * g11
+                     + qy * g12 + qx * g20 + qy * g21)
         dot = w * gw + qx * gx + qy * gy + qz * gz
         g_quats[n, 0] = (gw - w * dot) / qnorm
         g_quats[n, 1] = (gx - qx * dot) / qnorm

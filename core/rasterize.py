@@ -68,7 +68,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor
             order = vis[torch.argsort(proj.depths[vis], stable=True)]
         rgb, dsum, alpha = composite_reference(proj.means2d, proj.conics,
                                                torch.sigmoid(opacity_logits), colors, proj.depths,
-                                               proj.extent, order, width, height, bg)
+                                               proj.slopes, proj.extent, order, width, height, bg)
     else:
         from .raster_cpu import rasterize_cpu
         csum, dsum, alpha = rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K,
