@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+from artgs.core.joints import read_articulation
+from artgs.core.metrics import match_joints
 from artgs.core.synth import generate_object
 
 #: Reconstruction iteration cap: enough for a recognisable splat, keeps the demo to minutes on a CPU.
@@ -35,6 +37,12 @@ def main(argv: list[str]) -> int:
     for path in sorted(p for p in out.iterdir() if p.is_file()):
         print(f"  {path.name:18s} {path.stat().st_size:>10,d} bytes")
     print(f"  {'capture/':18s} the generated capture (ground truth: capture/gt.json)")
+    print("\nProposed joints against the ground truth (shared/spec/metrics.md):")
+    proposed = read_articulation(out / "proposals.json").joints
+    for s in match_joints(proposed, read_articulation(capture / "gt.json").joints):
+        oe = "" if s.origin_error_cm is None else f", origin error {s.origin_error_cm:.2f} cm"
+        print(f"  {s.true_name}: {s.pred_name or 'missed'}, type "
+              f"{'right' if s.type_correct else 'WRONG'}, axis error {s.axis_error_deg:.2f} deg{oe}")
     return 0
 
 

@@ -13,6 +13,7 @@ Exits 1 with the engine's message if a stage fails.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -89,7 +90,16 @@ def render_preview(scene: bpy.types.Scene, path: Path, width: int) -> None:
     scene.cycles.use_denoising = False
     scene.world = scene.world or bpy.data.worlds.new("ArtGS World")
     scene.world.color = (0.05, 0.05, 0.05)
-    bpy.ops.render.render(write_still=True)
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:  # Cycles logs every render phase on the C stdout: keep the script's output readable
+        with open(os.devnull, "wb") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            bpy.ops.render.render(write_still=True)
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    print(f"preview rendered: {path}", flush=True)
 
 
 def run(args: argparse.Namespace, module: str) -> None:
