@@ -35,7 +35,6 @@ Decisions where the format leaves room (also the documentation of what is accept
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -47,6 +46,7 @@ import numpy as np
 
 from .cameras import Camera, intrinsics
 from .errors import InputError
+from .jsonio import read_json_object
 
 PHASES = ("static", "interaction")
 CAMERA_MODELS = ("PINHOLE", "OPENCV")
@@ -175,15 +175,7 @@ def load_capture(path: str | Path) -> Capture:
 # --- transforms.json ---------------------------------------------------------------------------
 
 def _read_transforms(tj: Path) -> dict[str, Any]:
-    if not tj.is_file():
-        raise InputError(tj, "file not found: a capture folder needs a transforms.json")
-    try:
-        top = json.loads(tj.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(tj, f"not valid JSON ({exc})") from exc
-    if not isinstance(top, dict):
-        raise InputError(tj, f"must hold a JSON object, not a {type(top).__name__}")
-    return top
+    return read_json_object(tj, "file not found: a capture folder needs a transforms.json")
 
 
 def _is_number(v: Any) -> bool:

@@ -11,7 +11,6 @@ vectors, "half_size": xyz}). Unknown keys are kept on read and written back unch
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +20,7 @@ import numpy as np
 
 from . import atomic
 from .errors import InputError
+from .jsonio import read_json_object
 
 JOINT_TYPES = ("revolute", "prismatic")
 SOURCES = ("vlm", "motion", "user")
@@ -137,14 +137,7 @@ class Articulation:
 def read_articulation(path: str | Path) -> Articulation:
     """Read and validate ``articulation.json`` or ``proposals.json``."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "file not found")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"not valid JSON ({exc})") from exc
-    if not isinstance(data, dict):
-        raise InputError(path, "top level must be a JSON object")
+    data = read_json_object(path)
     if data.get("frame", "world") != "world":
         raise InputError(path, f"only the 'world' frame is supported, not {data['frame']!r}",
                          field="frame")

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Any
 
 from . import atomic
 from .errors import InputError
+from .jsonio import read_json_object
 
 SPLAT = "splat.ply"
 PROPOSALS = "proposals.json"
@@ -21,13 +21,7 @@ REPORT = "report.json"
 def read_report(out: str | Path) -> dict[str, Any]:
     """The run's report (empty if none yet)."""
     path = Path(out) / REPORT
-    if not path.is_file():
-        return {}
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise InputError(path, f"not valid JSON ({exc})") from exc
-    return data if isinstance(data, dict) else {}
+    return read_json_object(path) if path.is_file() else {}
 
 
 def update_report(out: str | Path, stage: str | None = None, **fields: Any) -> dict[str, Any]:

@@ -38,6 +38,15 @@ def cancel_all() -> None:
             wm.event_timer_remove(timer)
 
 
+def engine_inputs_ready(context: bpy.types.Context) -> bool:
+    """No job running, an output folder set and a capture folder with a transforms.json."""
+    settings = getattr(context.scene, "artgs", None)
+    if settings is None or job_running() or settings.output_path is None:
+        return False
+    capture = settings.capture_path
+    return capture is not None and (capture / "transforms.json").is_file()
+
+
 def figures_text(figures: dict[str, Any], limit: int = 4) -> str:
     """Key figures as ``name value`` pairs (floats to 4 significant digits)."""
     parts = []

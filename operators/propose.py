@@ -12,7 +12,7 @@ from ..artgs_addon.splat_preview import splat_preview_in
 from ..artgs_addon.worker import WorkerResult
 from ..core import outdir
 from ..core.joints import Articulation, read_articulation
-from ._job import WorkerOperator, job_running
+from ._job import WorkerOperator, engine_inputs_ready
 
 _PREFS = "Preferences > Add-ons > ArtGS"
 
@@ -39,11 +39,7 @@ class ARTGS_OT_propose_bones(WorkerOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
-        settings = getattr(context.scene, "artgs", None)
-        if settings is None or job_running() or settings.output_path is None:
-            return False
-        capture = settings.capture_path
-        return capture is not None and (capture / "transforms.json").is_file()
+        return engine_inputs_ready(context)
 
     def prepare(self, context: bpy.types.Context) -> str | None:
         if context.scene.artgs.proposal_method != "vlm":

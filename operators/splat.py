@@ -12,7 +12,7 @@ from ..artgs_addon.splat_preview import build_splat_preview, splat_preview_in
 from ..artgs_addon.worker import WorkerResult
 from ..core import outdir
 from ..core.errors import ArtgsError
-from ._job import WorkerOperator, figures_text, job_running
+from ._job import WorkerOperator, engine_inputs_ready, figures_text, job_running
 from .capture import preview_cap
 
 
@@ -45,11 +45,7 @@ class ARTGS_OT_reconstruct(WorkerOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
-        settings = getattr(context.scene, "artgs", None)
-        if settings is None or job_running() or settings.output_path is None:
-            return False
-        capture = settings.capture_path
-        return capture is not None and (capture / "transforms.json").is_file()
+        return engine_inputs_ready(context)
 
     def worker_args(self, context: bpy.types.Context) -> list[str]:
         settings = context.scene.artgs
