@@ -1,13 +1,16 @@
 """GPU backend: gsplat's CUDA rasterizer behind the same interface (used only if CUDA + gsplat).
 
 gsplat implements the same 3DGS model with its own small differences (alpha clamp 0.999, every
-pixel of a touched tile evaluated instead of the 3 sigma ellipse); it cannot be tested on CPU.
+pixel of a touched tile evaluated instead of the 3 sigma ellipse, and its expected depth blends
+each Gaussian's centre depth, not the planar depth of core/raster_model.py, so slanted surfaces
+render biased toward the camera by up to ~a pixel footprint); it cannot be tested on CPU.
 """
 
 from __future__ import annotations
 
 import torch
 
+from .raster_model import LOW_PASS
 from .sh import sh_degree
 
 
@@ -21,7 +24,7 @@ def rasterize_gsplat(means, quats, log_scales, opacity_logits, sh, K, w2c, width
     colors, alphas, _ = rasterization(
         means.to(f), quats.to(f), torch.exp(log_scales).to(f),
         torch.sigmoid(opacity_logits).to(f), sh.to(f), w2c.to(f)[None], K.to(f)[None],
-        int(width), int(height), near_plane=near, sh_degree=sh_degree(sh.shape[1]),
+        int(width), int(height), near_plane=near, eps2d=LOW_PASS, sh_degree=sh_degree(sh.shape[1]),
         render_mode="RGB+ED")
     alpha = alphas[0, ..., 0].to(means.dtype)
     rgb = colors[0, ..., :3].to(means.dtype) + (1.0 - alpha)[..., None] * background

@@ -2,7 +2,7 @@
 
 The model (3DGS / gsplat): camera-frame mean ``t = W p + w``; Gaussians with ``t_z <= near`` are
 culled; 3D covariance ``R S S^T R^T`` (R from the normalised quaternion, S = exp(log_scales));
-2D covariance ``J W Sigma W^T J^T + 0.3 I`` (the 0.3 px^2 low-pass dilation), with the Jacobian
+2D covariance ``J W Sigma W^T J^T + LOW_PASS I`` (the low-pass dilation, core/raster_model.py), with the Jacobian
 evaluated at ``t`` whose x/z, y/z are clamped to 1.3x the field of view (as gsplat does); the
 conic is the inverse 2D covariance. A Gaussian touches pixel centre ``p`` only inside its 3 sigma
 ellipse (``power = 0.5 d^T conic d <= 4.5``, d = p - mean2d); ``extent`` holds the half sizes

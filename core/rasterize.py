@@ -10,7 +10,9 @@ Gaussians, then front-to-back alpha compositing, by one of the backends:
 - ``"auto"``: gsplat for CUDA tensors when available, else ``"cpu"``.
 
 Outputs: rgb (H,W,3) over ``background``; depth (H,W) = alpha-weighted z-depth / alpha (0 where
-alpha < 1e-6); alpha (H,W) = 1 - final transmittance.
+alpha < 1e-6), each Gaussian contributing its planar depth at the pixel (the linearised depth of
+its max-density point along the pixel's ray, core/raster_model.py; gsplat: its centre depth);
+alpha (H,W) = 1 - final transmittance.
 """
 
 from __future__ import annotations

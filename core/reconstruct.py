@@ -8,9 +8,8 @@
    splat is already close, and faster opacity/geometry rates made held-out depth drift), one random
    training view per step: ``0.8 L1 + 0.2 (1 - SSIM)`` of the render (black background) against
    the masked image (L1 summed over the image, divided by the object pixels), ``+ depth L1``
-   (the rasterizer's alpha-normalised expected depth, or with ``planar_depth_loss`` the planar
-   depth of core/planar_depth.py, vs the measured depth where measured and inside the mask, in
-   units of 1% of the object size), ``+ alpha L1`` against the mask (keeps the background
+   (the rasterizer's alpha-normalised expected depth, planar per Gaussian, vs the measured depth
+   where measured and inside the mask, in units of 1% of the object size), ``+ alpha L1`` against the mask (keeps the background
    empty); densify (clone/split on view-space gradient) and prune (core/densify.py).
 3. Stop when the training loss plateaus (relative drop over a window below a tolerance) or at
    the iteration cap; write OUT/splat.ply atomically (a cancel or crash leaves the previous one).
@@ -19,9 +18,8 @@ Held-out evaluation (``holdout`` = K evenly spaced static views, never trained o
 - PSNR of the object pixels: the render over a black background vs the captured image, MSE over
   the 3 channels of the pixels inside the mask (values in [0,1]), ``PSNR = -10 log10(MSE)``;
 - depth MAE: mean |rendered depth - measured depth| in mm over pixels inside the mask with a
-  valid measured depth (rendered depth is 0 where nothing was rendered; those count), for the
-  rasterizer's depth (alpha-blended centre depths) and for the planar depth of
-  core/planar_depth.py (each Gaussian as a plane patch; no slant bias).
+  valid measured depth (rendered depth is 0 where nothing was rendered; those count), of the
+  rasterizer's depth (each Gaussian's linearised ray-intersection depth, see core/raster_model.py).
 """
 
 from __future__ import annotations
@@ -41,7 +39,6 @@ from .capture import Capture, Frame, load_capture
 from .densify import DensifyConfig, Densifier
 from .device import resolve_device
 from .errors import InputError
-from .planar_depth import planar_depth
 from .ply import SplatArrays, write_ply
 from .progress import Progress
 from .rasterize import rasterize
@@ -55,15 +52,14 @@ STAGE = "reconstruct"
 class ReconstructConfig:
     """Optimisation settings (defaults tuned on the synthetic benchmark, 160x120, 24 views)."""
 
-    max_iterations: int = 1200          # cap when no explicit iteration count is given
+    max_iterations: int = 400           # cap when no explicit iteration count is given
     sh_degree: int = 1
     lambda_ssim: float = 0.2
     lambda_depth: float = 0.1           # weight of depth L1 in units of 1% of the object size
     lambda_alpha: float = 0.5
-    planar_depth_loss: bool = False     # depth loss on the planar depth (one more render/step)
     init_opacity: float = 0.95
     voxel_pixels: float = 1.0           # init voxel = this many median pixel footprints
-    init_scale: float = 0.3             # init standard deviation, in pixel footprints
+    init_scale: float = 0.6             # init standard deviation, in pixel footprints
     init_flat: float = 0.1              # init thickness along the depth normal, x init_scale
     lr_means: float = 1.6e-5            # x object size, decaying to 1% of it
     lr_sh0: float = 2.5e-3
@@ -153,7 +149,7 @@ def normal_quats(normals: np.ndarray) -> np.ndarray:
 
 
 def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: float = 1.0,
-                   scale: float = 0.3, flat: float = 0.1, opacity: float = 0.95
+                   scale: float = 0.6, flat: float = 0.1, opacity: float = 0.95
                    ) -> tuple[SplatArrays, float]:
     """Gaussians from the frames' back-projected masked depth, voxel-downsampled.
 
@@ -211,22 +207,17 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
 
 @torch.no_grad()
 def evaluate(params: dict[str, torch.Tensor], views: list[View], backend: str) -> dict[str, float]:
-    """PSNR of the object pixels (dB), depth MAE (mm) of the rasterizer's depth and of the
-    planar depth (core/planar_depth.py) over ``views`` (see the module doc)."""
-    se, n_px, ae, ae_planar, n_d = 0.0, 0, 0.0, 0.0, 0
+    """PSNR of the object pixels (dB) and depth MAE (mm) over ``views`` (see the module doc)."""
+    se, n_px, ae, n_d = 0.0, 0, 0.0, 0
     for v in views:
         out = render_params(params, v, backend)
         m = v.mask.bool()
         se += float(((out.rgb - v.rgb)[m] ** 2).sum())
         n_px += 3 * int(m.sum())
         ae += float((out.depth - v.depth)[v.depth_valid].abs().sum())
-        d = planar_depth(params["means"], params["quats"], params["log_scales"],
-                         params["opacity_logits"], v.K, v.w2c, v.width, v.height, backend)
-        ae_planar += float((d - v.depth)[v.depth_valid].abs().sum())
         n_d += int(v.depth_valid.sum())
     mse = se / max(n_px, 1)
-    return {"psnr": -10 * math.log10(max(mse, 1e-12)), "depth_mae_mm": 1000 * ae / max(n_d, 1),
-            "planar_depth_mae_mm": 1000 * ae_planar / max(n_d, 1)}
+    return {"psnr": -10 * math.log10(max(mse, 1e-12)), "depth_mae_mm": 1000 * ae / max(n_d, 1)}
 
 
 # --- optimisation --------------------------------------------------------------------------------
@@ -276,11 +267,8 @@ class Trainer:
         l1 = (r.rgb - v.rgb).abs().sum() / (3 * v.pixels)  # per object pixel
         loss = (1 - cfg.lambda_ssim) * l1 + cfg.lambda_ssim * (1 - ssim(r.rgb, v.rgb))
         if cfg.lambda_depth and v.depth_valid.any():
-            depth = r.depth if not cfg.planar_depth_loss else planar_depth(
-                p["means"], p["quats"], p["log_scales"], p["opacity_logits"], v.K, v.w2c,
-                v.width, v.height, self.backend)
             loss = loss + cfg.lambda_depth / self.depth_unit * \
-                (depth - v.depth)[v.depth_valid].abs().mean()
+                (r.depth - v.depth)[v.depth_valid].abs().mean()
         if cfg.lambda_alpha:
             loss = loss + cfg.lambda_alpha * (r.alpha - v.mask).abs().mean()
         self.opt.zero_grad()
@@ -367,8 +355,7 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
     }
     if held:
         ev = evaluate(trainer.params, [make_view(i, static[i], dev) for i in held], backend)
-        figures.update(holdout_psnr=ev["psnr"], holdout_depth_mae_mm=ev["depth_mae_mm"],
-                       holdout_planar_depth_mae_mm=ev["planar_depth_mae_mm"])
+        figures.update(holdout_psnr=ev["psnr"], holdout_depth_mae_mm=ev["depth_mae_mm"])
     write_ply(Path(out) / outdir.SPLAT, result)
     figures["seconds"] = round(time.perf_counter() - t0, 2)
     return figures

@@ -14,6 +14,7 @@ from artgs.core.device import resolve_backend, resolve_device
 from artgs.core.errors import ArtgsError
 from artgs.core import raster_reference
 from artgs.core.gaussians import Gaussians
+from artgs.core.raster_model import LOW_PASS
 from artgs.core.raster_project import quat_to_rotmat
 from artgs.core.rasterize import rasterize, render
 from artgs.core.sh import C0, sh_basis
@@ -141,14 +142,15 @@ def test_joint_transform_upstream():
 
 def test_projection_matches_analytic_isotropic_gaussian():
     """An isotropic Gaussian of std s at depth z on the axis: alpha(d) = o exp(-d^2 / 2 v),
-    v = (f s / z)^2 + 0.3, and zero beyond 3 sigma."""
+    v = (f s / z)^2 + LOW_PASS, and zero beyond 3 sigma; its depth is z everywhere (on the axis,
+    the max-density point of every pixel's ray lies at z)."""
     f, z, s, o = 30.0, 2.0, 0.1, 0.6
     k = intrinsics(f, f, 16.0, 12.0)  # the mean projects to the corner between 4 pixels
     params = [torch.tensor([[0.0, 0.0, z]], dtype=DT), torch.tensor([[0.7, 0.1, -0.3, 0.2]], dtype=DT),
               torch.full((1, 3), math.log(s), dtype=DT), torch.tensor([math.log(o / (1 - o))], dtype=DT),
               torch.full((1, 1, 3), (0.8 - 0.5) / C0, dtype=DT)]
     out = rasterize(*params, k, np.eye(4), W, H, backend="cpu")
-    v = (f * s / z) ** 2 + 0.3
+    v = (f * s / z) ** 2 + LOW_PASS
     jj, ii = np.meshgrid(np.arange(W) + 0.5 - 16.0, np.arange(H) + 0.5 - 12.0)
     d2 = jj ** 2 + ii ** 2
     expected = o * np.exp(-0.5 * d2 / v)
@@ -172,7 +174,7 @@ def test_flat_disc_renders_its_plane_depth(backend):
     n = np.array([math.sin(2 * half), 0.0, math.cos(2 * half)])
     params = [torch.tensor(mean[None], dtype=DT),
               torch.tensor([[math.cos(half), 0, math.sin(half), 0]], dtype=DT),
-              torch.tensor([[math.log(0.05), math.log(0.05), -14.0]], dtype=DT),
+              torch.tensor([[math.log(0.06), math.log(0.06), -14.0]], dtype=DT),
               torch.tensor([3.0], dtype=DT), torch.zeros(1, 1, 3, dtype=DT)]
     out = rasterize(*params, k, np.eye(4), W, H, backend=backend)
     u, v = np.meshgrid(np.arange(W) + 0.5, np.arange(H) + 0.5)
@@ -259,7 +261,7 @@ def test_large_gaussians_beyond_the_view_edge():
 def test_degenerate_scales():
     params = random_scene(9, n=30)
     params[2] = params[2].clone()
-    params[2][:10] = -14.0                      # points: only the 0.3 px dilation remains
+    params[2][:10] = -14.0                      # points: only the low-pass dilation remains
     params[2][10:20, 0] = -14.0                 # flat discs
     params[2][20:25, 1:] = -14.0                # needles
     assert_match(render_both(params))
