@@ -52,7 +52,7 @@ STAGE = "reconstruct"
 class ReconstructConfig:
     """Optimisation settings (defaults tuned on the synthetic benchmark, 160x120, 24 views)."""
 
-    max_iterations: int = 400           # cap when no explicit iteration count is given
+    max_iterations: int = 1000          # cap when no explicit iteration count is given
     sh_degree: int = 1
     lambda_ssim: float = 0.2
     lambda_depth: float = 0.1           # weight of depth L1 in units of 1% of the object size
