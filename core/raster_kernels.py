@@ -251,7 +251,8 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
                 s_du += wd * dx
                 s_dv += wd * dy
                 dep_p = dep + su * dx + sv * dy
-                d_r, d_g, d_b, d_d = cr - rest[0, p], cg - rest[1, p], cbl - rest[2, p], dep_p - rest[3, p]
+                d_r, d_g, d_b = cr - rest[0, p], cg - rest[1, p], cbl - rest[2, p]
+                d_d = dep_p - rest[3, p]
                 g_alpha = Tb * (gr * d_r + gg * d_g + gb * d_b + gd * d_d) + gpix[4, p] * inv
                 # h = d alpha/d power * dL/d alpha / (-opacity); zero where alpha is clamped
                 h = gauss * g_alpha if valid & (raw <= ALPHA_MAX) else _ZERO

@@ -2,11 +2,12 @@
 
 The model (3DGS / gsplat): camera-frame mean ``t = W p + w``; Gaussians with ``t_z <= near`` are
 culled; 3D covariance ``R S S^T R^T`` (R from the normalised quaternion, S = exp(log_scales));
-2D covariance ``J W Sigma W^T J^T + LOW_PASS I`` (the low-pass dilation, core/raster_model.py), with the Jacobian
-evaluated at ``t`` whose x/z, y/z are clamped to 1.3x the field of view (as gsplat does); the
-conic is the inverse 2D covariance. A Gaussian touches pixel centre ``p`` only inside its 3 sigma
-ellipse (``power = 0.5 d^T conic d <= 4.5``, d = p - mean2d); ``extent`` holds the half sizes
-of the ellipse's axis-aligned bounding box, ``3 sqrt(cov2d_xx)``, ``3 sqrt(cov2d_yy)``.
+2D covariance ``J W Sigma W^T J^T + LOW_PASS I`` (the low-pass dilation, core/raster_model.py),
+with the Jacobian evaluated at ``t`` whose x/z, y/z are clamped to 1.3x the field of view (as
+gsplat does); the conic is the inverse 2D covariance. A Gaussian touches pixel centre ``p`` only
+inside its 3 sigma ellipse (``power = 0.5 d^T conic d <= 4.5``, d = p - mean2d); ``extent`` holds
+the half sizes of the ellipse's axis-aligned bounding box, ``3 sqrt(cov2d_xx)``, ``3
+sqrt(cov2d_yy)``.
 ``slopes`` are the planar depth's change per pixel (core/raster_model.py): with ``M = W R`` and
 ``b = M^T t`` (the mean in the Gaussian's own frame), ``Sigma^-1 t = M (b / s^2)`` and
 ``t^T Sigma^-1 t = sum(b^2 / s^2)``, so no 3x3 inverse is needed.

@@ -60,9 +60,15 @@ def _column_backward(cam, R, s, j, j00, j02, j11, j12, g_a, g_b, g_c):
 @njit(fastmath=True, cache=True)
 def _camera_rotation(cam, R):
     """M = W R, the camera-from-Gaussian rotation (row-major 9-tuple)."""
-    return (cam[4] * R[0] + cam[5] * R[3] + cam[6] * R[6], cam[4] * R[1] + cam[5] * R[4] + cam[6] * R[7], cam[4] * R[2] + cam[5] * R[5] + cam[6] * R[8],
-         cam[7] * R[0] + cam[8] * R[3] + cam[9] * R[6], cam[7] * R[1] + cam[8] * R[4] + cam[9] * R[7], cam[7] * R[2] + cam[8] * R[5] + cam[9] * R[8],
-         cam[10] * R[0] + cam[11] * R[3] + cam[12] * R[6], cam[10] * R[1] + cam[11] * R[4] + cam[12] * R[7], cam[10] * R[2] + cam[11] * R[5] + cam[12] * R[8])
+    return (cam[4] * R[0] + cam[5] * R[3] + cam[6] * R[6],
+            cam[4] * R[1] + cam[5] * R[4] + cam[6] * R[7],
+            cam[4] * R[2] + cam[5] * R[5] + cam[6] * R[8],
+            cam[7] * R[0] + cam[8] * R[3] + cam[9] * R[6],
+            cam[7] * R[1] + cam[8] * R[4] + cam[9] * R[7],
+            cam[7] * R[2] + cam[8] * R[5] + cam[9] * R[8],
+            cam[10] * R[0] + cam[11] * R[3] + cam[12] * R[6],
+            cam[10] * R[1] + cam[11] * R[4] + cam[12] * R[7],
+            cam[10] * R[2] + cam[11] * R[5] + cam[12] * R[8])
 
 
 @njit(fastmath=True, cache=True)

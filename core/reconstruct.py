@@ -9,8 +9,9 @@
    training view per step: ``0.8 L1 + 0.2 (1 - SSIM)`` of the render (black background) against
    the masked image (L1 summed over the image, divided by the object pixels), ``+ depth L1``
    (the rasterizer's alpha-normalised expected depth, planar per Gaussian, vs the measured depth
-   where measured and inside the mask, in units of 1% of the object size), ``+ alpha L1`` against the mask (keeps the background
-   empty); densify (clone/split on view-space gradient) and prune (core/densify.py).
+   where measured and inside the mask, in units of 1% of the object size), ``+ alpha L1`` against
+   the mask (keeps the background empty); densify (clone/split on view-space gradient) and prune
+   (core/densify.py).
 3. Stop when the training loss plateaus (relative drop over a window below a tolerance) or at
    the iteration cap; write OUT/splat.ply atomically (a cancel or crash leaves the previous one).
 
