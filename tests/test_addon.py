@@ -342,12 +342,14 @@ def test_two_objects_in_one_scene_get_two_armatures(scene, tmp_path, capture):
     bpy.context.view_layer.objects.active = drawer_arm
     assert find_armature(bpy.context) == cabinet
     drawer_file = (outs["drawer"] / "proposals.json").read_bytes()
-    bone = cabinet.data.bones[0]
+    bone_name = cabinet.data.bones[0].name     # a name, not the bone: RNA pointers go stale
+    bone = cabinet.data.bones[bone_name]
     bone.artgs_joint.upper = bone.artgs_joint.upper * 0.5
     _run(bpy.ops.artgs.save_joints)
     saved = {j.name: j for j in read_articulation(outs["cabinet"] / "proposals.json").joints}
-    assert saved[bone.name].source == "user"
-    assert saved[bone.name].limit[1] == pytest.approx(bone.artgs_joint.upper, rel=1e-6)
+    assert saved[bone_name].source == "user"
+    assert saved[bone_name].limit[1] == pytest.approx(
+        cabinet.data.bones[bone_name].artgs_joint.upper, rel=1e-6)
     assert (outs["drawer"] / "proposals.json").read_bytes() == drawer_file
 
     # Proposing again for the drawer rebuilds the drawer's armature in place.
@@ -355,7 +357,8 @@ def test_two_objects_in_one_scene_get_two_armatures(scene, tmp_path, capture):
     assert find_armature(bpy.context) == drawer_arm
     _run(bpy.ops.artgs.propose_bones)
     assert sorted(o.name for o in bpy.data.objects if o.type == "ARMATURE") == sorted(arms)
-    assert saved[bone.name].limit[1] == pytest.approx(cabinet.data.bones[0].artgs_joint.upper)
+    assert saved[bone_name].limit[1] == pytest.approx(
+        cabinet.data.bones[bone_name].artgs_joint.upper)
 
     # An output folder without an armature gets none of the others'.
     settings.output_dir = str(tmp_path / "out_new")
