@@ -12,7 +12,6 @@ from pathlib import Path
 
 from . import outdir
 from .capture import load_capture
-from .errors import InputError
 from .joints import Articulation, read_articulation, write_articulation
 from .progress import Progress
 
@@ -20,23 +19,21 @@ from .progress import Progress
 def run(capture_dir: Path, out: Path, progress: Progress, *, method: str = "motion",
         iterations: int | None = None, device: str = "auto", vlm=None) -> Articulation:
     """Run the pipeline; returns the articulation written to ``out``."""
-    from .propose import propose
-    from .reconstruct import reconstruct
+    from .propose import check_capture, propose_stage
+    from .reconstruct import reconstruct_stage
 
     start = time.perf_counter()
     progress.start("validate")
     capture = load_capture(capture_dir)
-    if not capture.interaction:
-        raise InputError(capture_dir / "transforms.json", "no interaction frames: joints can only "
-                         "be found from frames with phase 'interaction'", field="frames")
+    check_capture(capture, method, vlm)
     out.mkdir(parents=True, exist_ok=True)
     outdir.update_report(out, capture=str(capture_dir.resolve()))
     progress.finish("validate", frames=len(capture.frames), interaction=len(capture.interaction))
 
-    reconstruct(capture, out, progress, iterations=iterations, device=device)
-    proposals = propose(capture, out, progress, method=method, device=device, vlm=vlm)
+    reconstruct_stage(capture, out, progress, iterations=iterations, device=device)
+    proposals = propose_stage(capture, out, progress, method=method, device=device, vlm=vlm)
 
-    articulation = Articulation(proposals.joints, {"source": outdir.PROPOSALS, **proposals.meta})
+    articulation = Articulation(proposals.joints, {**proposals.meta, "optimised": False})
     write_articulation(out / outdir.ARTICULATION, articulation)
     outdir.update_report(out, "run", seconds=time.perf_counter() - start,
                          joints=len(articulation.joints))

@@ -28,12 +28,17 @@ METHODS = ("motion", "vlm")
 
 def check_inputs(capture: Capture, out: str | Path, method: str, vlm: Any) -> Path:
     """Refuse unusable input before any work; returns the splat's path."""
+    check_capture(capture, method, vlm)
+    return outdir.require(out, outdir.SPLAT, "reconstruct")
+
+
+def check_capture(capture: Capture, method: str, vlm: Any) -> None:
+    """Refuse a method the capture or the configuration cannot serve (before reconstruction)."""
     if method not in METHODS:
         raise InputError("--method", f"must be one of {METHODS}, not {method!r}")
     if method == "vlm" and vlm is None:
         from .vlm_client import vlm_config
         vlm_config()   # raises, naming $ARTGS_VLM_ENDPOINT / $ARTGS_VLM_MODEL
-    splat = outdir.require(out, outdir.SPLAT, "reconstruct")
     if method == "motion":
         tj = Path(capture.root) / TRANSFORMS
         frames = [f for f in capture.interaction if f.depth is not None and f.time is not None]
@@ -48,7 +53,6 @@ def check_inputs(capture: Capture, out: str | Path, method: str, vlm: Any) -> Pa
         if missing:
             raise InputError(tj, "the motion route needs depth on every interaction frame",
                              frame=missing[0].index, field="depth_file_path")
-    return splat
 
 
 def propose(capture: Capture, out: str | Path, progress: Progress, *, method: str = "motion",
@@ -83,6 +87,15 @@ def propose(capture: Capture, out: str | Path, progress: Progress, *, method: st
     return articulation
 
 
+def propose_stage(capture: Capture, out: str | Path, progress: Progress, *, method: str = "motion",
+                  device: str = "auto", vlm=None) -> Articulation:
+    """:func:`propose` as a pipeline stage, between progress start and finish."""
+    progress.start(STAGE, f"proposing joints ({method})")
+    articulation = propose(capture, out, progress, method=method, device=device, vlm=vlm)
+    progress.finish(STAGE, joints=len(articulation.joints))
+    return articulation
+
+
 def _render_depth(arrays, camera, device: str) -> np.ndarray:
     """Depth of the splat seen by ``camera`` (for interaction cameras without a time-0 frame)."""
     import torch
@@ -108,11 +121,10 @@ def propose_command(args, progress: Progress) -> int:
     capture_path = outdir.capture_of(out, args.capture)
     capture = load_capture(capture_path)
     check_inputs(capture, out, args.method, vlm)
-    progress.start(STAGE, f"proposing joints ({args.method})")
-    articulation = propose(capture, out, progress, method=args.method, device=args.device, vlm=vlm)
+    articulation = propose_stage(capture, out, progress, method=args.method, device=args.device,
+                                 vlm=vlm)
     if args.capture is not None:
         outdir.update_report(out, capture=str(Path(capture_path).resolve()))
-    progress.finish(STAGE, joints=len(articulation.joints))
     for j in articulation.joints:
         unit = "rad" if j.type == "revolute" else "m"
         progress.log(f"{j.name}: {j.type} axis {np.round(j.axis, 3).tolist()} origin "

@@ -371,11 +371,18 @@ def reconstruct_command(args, progress: Progress) -> int:
         raise InputError(capture_path, f"--holdout must be 0..{len(capture.static) - 1}, "
                          f"not {args.holdout}", field="holdout")
     outdir.update_report(out, capture=str(Path(capture_path).resolve()))
+    reconstruct_stage(capture, out, progress, iterations=args.iterations, holdout=args.holdout,
+                      device=args.device)
+    progress.finished(splat=str(out / outdir.SPLAT))
+    return 0
+
+
+def reconstruct_stage(capture: Capture, out: str | Path, progress: Progress,
+                      **options: Any) -> dict[str, Any]:
+    """:func:`reconstruct` as a pipeline stage: progress start/finish and its report.json entry."""
     progress.start(STAGE, "optimising the static splat")
-    figures = reconstruct(capture, out, progress, iterations=args.iterations,
-                          holdout=args.holdout, device=args.device)
+    figures = reconstruct(capture, out, progress, **options)
     seconds = progress.finish(STAGE, **{k: v for k, v in figures.items()
                                         if isinstance(v, (int, float, str))})
     outdir.update_report(out, STAGE, **{**figures, "seconds": round(seconds, 2)})
-    progress.finished(splat=str(out / outdir.SPLAT))
-    return 0
+    return figures

@@ -80,7 +80,7 @@ def vlm_config(args_endpoint: str | None = None, args_model: str | None = None,
     if not model:
         raise InputError("--vlm-model", f"no VLM model name configured: set ${ENV_MODEL} (or the "
                          "add-on preference 'VLM model', or --vlm-model), e.g. the name the server "
-                         "lists at {endpoint}/models")
+                         f"lists at {endpoint}/models")
     if not timeout or timeout <= 0:
         raise InputError("--vlm-timeout", f"must be a positive number of seconds, not {timeout}")
     coords = options.pop("coords", None) or os.environ.get(ENV_COORDS, "auto")

@@ -1,0 +1,86 @@
+"""``artgs run``: the whole output contract of shared/spec/outputs.md on one generated capture."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from artgs.core.joints import read_articulation
+from artgs.core.metrics import match_joints
+from artgs.core.ply import read_ply
+from artgs.core.synth import generate_object
+
+
+def _artgs(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "artgs", *args], capture_output=True, text=True,
+                          env=env, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def cabinet(tmp_path_factory) -> Path:
+    return generate_object(tmp_path_factory.mktemp("cap") / "cabinet", "cabinet", 3, width=96,
+                           height=72, static_views=10, steps=3)
+
+
+def test_run_writes_every_output_and_finds_the_joints(cabinet, tmp_path):
+    out = tmp_path / "out"
+    res = _artgs("run", str(cabinet), "--out", str(out), "--iterations", "60", "--json")
+    assert res.returncode == 0, res.stderr + res.stdout
+    events = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
+    stages = [e["stage"] for e in events if e["event"] == "stage_done"]
+    assert stages[0] == "validate" and "reconstruct" in stages and "propose" in stages
+    assert events[-1]["event"] == "finished"
+    assert {"splat.ply", "proposals.json", "articulation.json", "report.json"} <= set(
+        events[-1]["outputs"]["files"])
+
+    splat = read_ply(out / "splat.ply")
+    assert splat.means.shape[0] > 1000 and splat.sh.shape[1:] in ((1, 3), (4, 3))
+    art = read_articulation(out / "articulation.json")
+    proposals = read_articulation(out / "proposals.json")
+    assert [j.to_dict() for j in art.joints] == [j.to_dict() for j in proposals.joints]
+    assert art.meta["optimised"] is False and art.meta["source"] == "motion"
+    gt = read_articulation(cabinet / "gt.json").joints
+    for score in match_joints(art.joints, gt):
+        assert score.type_correct and score.axis_error_deg < 3.0, score
+        assert score.origin_error_cm is None or score.origin_error_cm < 3.0, score
+    report = json.loads((out / "report.json").read_text())
+    assert report["capture"] == str(cabinet.resolve())
+    assert {"reconstruct", "propose", "run"} <= set(report["stages"])
+    assert all(report["stages"][s]["seconds"] > 0 for s in ("reconstruct", "propose", "run"))
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]    # no temp files left
+
+
+def test_run_refuses_bad_input_before_any_work(cabinet, tmp_path):
+    # a broken frame: the message names the file, the frame and the field; nothing is written
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    tj = json.loads((cabinet / "transforms.json").read_text())
+    del tj["frames"][2]["transform_matrix"]
+    for sub in ("images", "depth", "masks"):
+        os.symlink(cabinet / sub, broken / sub)
+    (broken / "transforms.json").write_text(json.dumps(tj))
+    out = tmp_path / "out"
+    res = _artgs("run", str(broken), "--out", str(out))
+    assert res.returncode == 2
+    assert "transforms.json" in res.stderr and "frame 2" in res.stderr \
+        and "transform_matrix" in res.stderr
+    assert not out.exists()
+
+    # the motion route without interaction frames is refused before reconstruction starts
+    tj = json.loads((cabinet / "transforms.json").read_text())
+    tj["frames"] = [f for f in tj["frames"] if f.get("phase") != "interaction"]
+    (broken / "transforms.json").write_text(json.dumps(tj))
+    res = _artgs("run", str(broken), "--out", str(out))
+    assert res.returncode == 2 and "transforms.json" in res.stderr and "interaction" in res.stderr
+    assert not (out / "splat.ply").exists()
+
+    # the VLM method without an endpoint is refused before reconstruction starts
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ARTGS_VLM")}
+    res = _artgs("run", str(cabinet), "--out", str(out), "--method", "vlm", env=env)
+    assert res.returncode == 2 and "ARTGS_VLM_ENDPOINT" in res.stderr
+    assert not (out / "splat.ply").exists()
