@@ -71,11 +71,11 @@ def _count_pairs(feats, offsets, ids, width, height):
     return total
 
 
-def blended_pairs(params, K, w2c, size) -> tuple[int, int]:
+def blended_pairs(params, K, w2c, size, low_pass: float) -> tuple[int, int]:
     """(blended pairs, pixels inside 3 sigma boxes of tile lists) for the scene."""
     with torch.no_grad():
         Kt, wt = torch.as_tensor(K, dtype=torch.float32), torch.as_tensor(w2c, dtype=torch.float32)
-        proj = project(params[0], params[1], params[2], Kt, wt, size, size)
+        proj = project(params[0], params[1], params[2], Kt, wt, size, size, low_pass=low_pass)
         vis = torch.nonzero(proj.visible).squeeze(1)
         order = vis[torch.argsort(proj.depths[vis], stable=True)]
         feats = torch.cat([proj.means2d[order], proj.conics[order],
@@ -113,7 +113,7 @@ def _reference_memory(params, K, w2c, size) -> float:
     return n_block_pairs * 256 * 12 * 4
 
 
-def bench_one(size: int, n: int, backend: str, runs: int, grad: bool
+def bench_one(size: int, n: int, backend: str, runs: int, grad: bool, low_pass: float
               ) -> tuple[float, float, float]:
     """``_time`` of the forward (grad=False) or forward+backward (grad=True) pass."""
     params, K, w2c = shell_scene(n, size)
@@ -122,7 +122,8 @@ def bench_one(size: int, n: int, backend: str, runs: int, grad: bool
     wc = torch.rand(size, size, 3, generator=g)
 
     def step():
-        out = rasterize(*ps, K, w2c, size, size, background=[0.0, 0.0, 0.0], backend=backend)
+        out = rasterize(*ps, K, w2c, size, size, background=[0.0, 0.0, 0.0], backend=backend,
+                        low_pass=low_pass)
         if grad:
             loss = (out.rgb * wc).sum() + out.depth.sum() + out.alpha.sum()
             loss.backward()
@@ -136,7 +137,7 @@ def bench_render_command(args, progress) -> int:
     torch.set_num_threads(THREADS)
     numba.set_num_threads(min(THREADS, numba.config.NUMBA_NUM_THREADS))
     say = print if progress.mode == "text" else (lambda *a, **k: None)
-    say(f"bench-render: shell scene, SH degree 0, threads torch={torch.get_num_threads()} "
+    say(f"bench-render: shell scene, SH degree 0, low-pass {args.low_pass} px^2, threads torch={torch.get_num_threads()} "
         f"numba={numba.get_num_threads()}, median of {args.runs} runs after 2 warm-up runs; "
         f"machine load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     say("wall times: median (min) ms; cpu: median process CPU ms (all threads; less sensitive "
@@ -147,7 +148,7 @@ def bench_render_command(args, progress) -> int:
     cases = [(s, n) for s in args.sizes for n in args.counts]
     for idx, (size, n) in enumerate(cases):
         params, K, w2c = shell_scene(n, size)
-        pairs, _ = blended_pairs(params, K, w2c, size)
+        pairs, _ = blended_pairs(params, K, w2c, size, args.low_pass)
         rows = [("cpu", args.runs, "")]
         if not args.no_reference:
             mem = _reference_memory(params, K, w2c, size)
@@ -156,8 +157,8 @@ def bench_render_command(args, progress) -> int:
             rows.append(("reference", max(3, args.runs // 5), note))
         for backend, runs, note in rows:
             progress.update("bench-render", idx / len(cases), f"{size}^2 N={n} {backend}")
-            fwd = bench_one(size, n, backend, runs, grad=False)
-            both = None if note else bench_one(size, n, backend, runs, grad=True)
+            fwd = bench_one(size, n, backend, runs, False, args.low_pass)
+            both = None if note else bench_one(size, n, backend, runs, True, args.low_pass)
             results.append({"size": size, "n": n, "pairs": pairs, "backend": backend, "runs": runs,
                             "fwd_ms": round(fwd[0], 2), "fwd_min_ms": round(fwd[1], 2),
                             "fwd_bwd_ms": None if both is None else round(both[0], 2),

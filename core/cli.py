@@ -17,6 +17,7 @@ from typing import Callable
 
 from .errors import ArtgsError, Cancelled, InputError
 from .progress import Progress
+from .raster_model import LOW_PASS
 
 CATEGORIES = ("dishwasher", "refrigerator", "oven", "microwave", "storage", "drawer", "cabinet")
 
@@ -121,6 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--counts", type=int, nargs="+", default=[20000, 50000])
     p.add_argument("--runs", type=int, default=15)
     p.add_argument("--no-reference", action="store_true", help="skip the slow pure-torch reference")
+    p.add_argument("--low-pass", type=float, default=LOW_PASS,
+                   help=f"2D dilation in px^2 (default: the project's {LOW_PASS}; 0.3 = original 3DGS)")
     _common(p)
 
     p = sub.add_parser("bench-reconstruct", help="reconstruction quality/speed per category")

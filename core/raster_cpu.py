@@ -24,13 +24,15 @@ class _RasterizeCPU(torch.autograd.Function):
     background, alpha-weighted depth sum (H,W), alpha (H,W)."""
 
     @staticmethod
-    def forward(ctx, means, quats, log_scales, opacity_logits, colors, cam, width, height, near):
+    def forward(ctx, means, quats, log_scales, opacity_logits, colors, cam, width, height, near,
+                low_pass):
         arrays = [_f32(t) for t in (means, quats, log_scales, opacity_logits, colors)]
         n = arrays[0].shape[0]
         proj = np.empty((n, rk.NF), np.float32)
         extent = np.empty((n, 2), np.float32)
         visible = np.empty(n, np.bool_)
-        pk.project_forward(*arrays, cam, width, height, np.float32(near), proj, extent, visible)
+        pk.project_forward(*arrays, cam, width, height, np.float32(near), np.float32(low_pass),
+                           proj, extent, visible)
         order, feats, ext = rk.sort_visible(proj, extent, visible)
         offsets, ids = rk.bin_tiles(feats, ext, width, height)
         out_c = np.empty((height, width, 3), np.float32)
@@ -61,7 +63,7 @@ class _RasterizeCPU(torch.autograd.Function):
                             *outs)
         result = [torch.from_numpy(g).to(device=device, dtype=dtype)
                   for g, (dtype, device) in zip(outs, ctx.like)]
-        return (*result, None, None, None, None)
+        return (*result, None, None, None, None, None)
 
 
 def _grad(g: torch.Tensor | None, shape) -> np.ndarray:
@@ -75,7 +77,9 @@ def camera_array(K: torch.Tensor, w2c: torch.Tensor) -> np.ndarray:
                            w2c[:3, 3]]).astype(np.float32)
 
 
-def rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K, w2c, width, height, near):
+def rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K, w2c, width, height, near,
+                  low_pass):
     """Colour sum without background (H,W,3), alpha-weighted depth sum (H,W), alpha (H,W)."""
     return _RasterizeCPU.apply(means, quats, log_scales, opacity_logits, colors,
-                               camera_array(K, w2c), int(width), int(height), float(near))
+                               camera_array(K, w2c), int(width), int(height), float(near),
+                               float(low_pass))

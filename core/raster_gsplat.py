@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import torch
 
-from .raster_model import LOW_PASS
 from .sh import sh_degree
 
 
 def rasterize_gsplat(means, quats, log_scales, opacity_logits, sh, K, w2c, width, height,
-                     background, near):
+                     background, near, low_pass):
     """-> rgb (H,W,3) over ``background``, expected depth (H,W), alpha (H,W) (float32 inside,
     returned in the dtype of ``means``)."""
     from gsplat import rasterization
@@ -24,7 +23,7 @@ def rasterize_gsplat(means, quats, log_scales, opacity_logits, sh, K, w2c, width
     colors, alphas, _ = rasterization(
         means.to(f), quats.to(f), torch.exp(log_scales).to(f),
         torch.sigmoid(opacity_logits).to(f), sh.to(f), w2c.to(f)[None], K.to(f)[None],
-        int(width), int(height), near_plane=near, eps2d=LOW_PASS, sh_degree=sh_degree(sh.shape[1]),
+        int(width), int(height), near_plane=near, eps2d=low_pass, sh_degree=sh_degree(sh.shape[1]),
         render_mode="RGB+ED")
     alpha = alphas[0, ..., 0].to(means.dtype)
     rgb = colors[0, ..., :3].to(means.dtype) + (1.0 - alpha)[..., None] * background

@@ -53,7 +53,7 @@ def as_tensor(a, like: torch.Tensor) -> torch.Tensor:
 
 def project(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
             K: torch.Tensor, w2c: torch.Tensor, width: int, height: int,
-            near: float = NEAR_PLANE) -> Projected:
+            near: float = NEAR_PLANE, low_pass: float = LOW_PASS) -> Projected:
     """Project Gaussians with intrinsics ``K`` (3x3) and world-to-camera ``w2c`` (4x4, OpenCV)."""
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     Rw, tw = w2c[:3, :3], w2c[:3, 3]
@@ -76,9 +76,9 @@ def project(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
     M = R * torch.exp(log_scales)[:, None, :]   # R S
     T = J @ Rw @ M                                                  # (N,2,3)
     cov = T @ T.transpose(1, 2)
-    ca = cov[:, 0, 0] + LOW_PASS
+    ca = cov[:, 0, 0] + low_pass
     cb = cov[:, 0, 1]
-    cc = cov[:, 1, 1] + LOW_PASS
+    cc = cov[:, 1, 1] + low_pass
     det = ca * cc - cb * cb
     ok = in_front & (det > 0)
     det = torch.where(ok, det, torch.ones_like(det))

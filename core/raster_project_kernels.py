@@ -14,7 +14,6 @@ from numba import njit, prange
 from . import raster_model as model
 
 f32 = np.float32
-LOW_PASS = f32(model.LOW_PASS)
 SIGMA = f32(model.SIGMA_CUTOFF)
 _ZERO, _ONE, _TWO = f32(0.0), f32(1.0), f32(2.0)
 _FOV_PAD = f32(model.FOV_PAD)
@@ -139,7 +138,7 @@ def _limits(cam, width, height):
 
 @njit(parallel=True, fastmath=True, cache=True)
 def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width, height, near,
-                    out, extent, visible):
+                    low_pass, out, extent, visible):
     """Fill ``out`` (N,12), ``extent`` (N,2) and ``visible`` (N,) for every Gaussian."""
     fx, fy, cx, cy = cam[0], cam[1], cam[2], cam[3]
     lxp, lxn, lyp, lyn = _limits(cam, width, height)
@@ -164,8 +163,8 @@ def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width
             a += t0 * t0
             b += t0 * t1
             c += t1 * t1
-        a += LOW_PASS
-        c += LOW_PASS
+        a += low_pass
+        c += low_pass
         det = a * c - b * b
         if not det > _ZERO:
             continue

@@ -23,7 +23,7 @@ import torch
 
 from .device import resolve_backend
 from .gaussians import Gaussians
-from .raster_model import NEAR_PLANE
+from .raster_model import LOW_PASS, NEAR_PLANE
 from .raster_project import as_tensor, project
 from .raster_reference import composite_reference
 from .sh import eval_sh_colors
@@ -41,8 +41,12 @@ class RenderOutput(NamedTuple):
 
 def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
               opacity_logits: torch.Tensor, sh: torch.Tensor, K, w2c, width: int, height: int,
-              background=None, backend: str = "auto", near: float = NEAR_PLANE) -> RenderOutput:
+              background=None, backend: str = "auto", near: float = NEAR_PLANE,
+              low_pass: float = LOW_PASS) -> RenderOutput:
     """Render N Gaussians with intrinsics ``K`` (3x3) and ``w2c`` (4x4, OpenCV axes).
+
+    ``low_pass``: the 2D dilation in px^2 (this project's default, core/raster_model.py; 0.3 is
+    the original 3DGS value, for splats trained with it).
 
     Differentiable w.r.t. every Gaussian input (and ``background`` if it is a tensor).
     """
@@ -57,14 +61,14 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor
     if backend == "gsplat":
         from .raster_gsplat import rasterize_gsplat
         rgb, depth, alpha = rasterize_gsplat(means, quats, log_scales, opacity_logits, sh, K, w2c,
-                                             width, height, bg, near)
+                                             width, height, bg, near, low_pass)
         depth = torch.where(alpha > ALPHA_EPS, depth, torch.zeros_like(depth))
         return RenderOutput(rgb, depth, alpha)
 
     cam_center = -w2c[:3, :3].T @ w2c[:3, 3]
     colors = eval_sh_colors(sh, means, cam_center)
     if backend == "reference":
-        proj = project(means, quats, log_scales, K, w2c, width, height, near)
+        proj = project(means, quats, log_scales, K, w2c, width, height, near, low_pass)
         with torch.no_grad():
             vis = torch.nonzero(proj.visible).squeeze(1)
             order = vis[torch.argsort(proj.depths[vis], stable=True)]
@@ -74,7 +78,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor
     else:
         from .raster_cpu import rasterize_cpu
         csum, dsum, alpha = rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K,
-                                          w2c, width, height, near)
+                                          w2c, width, height, near, low_pass)
         rgb = csum + (1.0 - alpha)[..., None] * bg
     valid = alpha > ALPHA_EPS
     depth = torch.where(valid, dsum / torch.where(valid, alpha, torch.ones_like(alpha)),

@@ -37,7 +37,8 @@ def random_scene(seed: int, n: int = 50, degree: int = 1, dtype=DT) -> list[torc
     return [means, quats, log_scales, opacity_logits, sh]
 
 
-def render_both(params, w2c=np.eye(4), width=W, height=H, k=K, weights_seed=0):
+def render_both(params, w2c=np.eye(4), width=W, height=H, k=K, weights_seed=0,
+                low_pass=LOW_PASS):
     """Renders with both backends; returns {backend: (outputs, gradients of a random loss)}."""
     gen = torch.Generator().manual_seed(weights_seed)
     wc = torch.rand(height, width, 3, generator=gen, dtype=DT)
@@ -46,7 +47,8 @@ def render_both(params, w2c=np.eye(4), width=W, height=H, k=K, weights_seed=0):
     result = {}
     for backend in ("reference", "cpu"):
         ps = [p.detach().clone().requires_grad_(True) for p in params]
-        out = rasterize(*ps, k, w2c, width, height, background=BG, backend=backend)
+        out = rasterize(*ps, k, w2c, width, height, background=BG, backend=backend,
+                        low_pass=low_pass)
         loss = (out.rgb * wc).sum() + (out.depth * wd).sum() + (out.alpha * wa).sum()
         grads = torch.autograd.grad(loss, ps, allow_unused=True)
         result[backend] = (out, [torch.zeros_like(p) if gr is None else gr
@@ -81,6 +83,16 @@ def test_matches_reference(seed, degree):
     ref = result["reference"][0]
     assert float(ref.alpha.detach().max()) > 0.9 and float(ref.alpha.detach().min()) < 0.1  # a non-trivial scene
     assert_match(result)
+
+
+def test_original_3dgs_low_pass_matches_reference():
+    """``low_pass=0.3`` (the original 3DGS dilation, for splats trained with it) in both backends:
+    the same model, and wider footprints than the default."""
+    params = random_scene(5, degree=1)
+    result = render_both(params, weights_seed=5, low_pass=0.3)
+    assert_match(result)
+    default = rasterize(*params, K, np.eye(4), W, H, BG, backend="cpu")
+    assert float(result["cpu"][0].alpha.detach().sum()) > float(default.alpha.sum()) + 1e-3
 
 
 def test_matches_reference_general_camera():
