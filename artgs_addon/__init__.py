@@ -16,7 +16,9 @@ import bpy
 
 def _modules() -> list[ModuleType]:
     """The modules that register something, in registration order."""
-    from . import bone_props, preferences, properties
+    from . import bone_props
+    from . import preferences
+    from . import properties
     from ..operators import bones as bone_operators
     from ..operators import capture, engine, propose, splat
     from ..panels import bones as bone_panel

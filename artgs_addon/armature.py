@@ -27,9 +27,9 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from ..core.errors import ArtgsError, InputError
-from ..core.joints import Articulation, Joint, read_articulation, write_articulation
-from ..core.parts import assign_parts
+from ..core.model.errors import ArtgsError, InputError
+from ..core.model.joints import Articulation, Joint, read_articulation, write_articulation
+from ..core.geometry.parts import assign_parts
 from .bone_props import ArtgsJointProps
 
 SIZE_KEY = "artgs_size"    # on the armature data: object size in metres; marks ArtGS armatures

@@ -14,8 +14,8 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..core.cameras import Camera
-from ..core.capture_preview import CapturePreview
+from ..core.model.cameras import Camera
+from ..core.model.capture_preview import CapturePreview
 from .pointcloud import point_cloud_object
 
 #: Sensor width of the imported cameras, millimetres (any value works; the focal length follows).

@@ -14,8 +14,8 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core.ply import SplatArrays, read_ply
-from ..core.sampling import subsample
+from ..core.model.ply import SplatArrays, read_ply
+from ..core.model.sampling import subsample
 from .pointcloud import point_cloud_object
 
 SPLAT_KEY = "artgs_splat"  # on a splat preview object: the PLY it shows (absolute path)

@@ -1,7 +1,7 @@
 """The engine worker: one ``python -m artgs COMMAND ... --json`` subprocess, read without blocking.
 
 No bpy here (unit-tested outside Blender). Reader threads move the worker's JSON progress lines
-(protocol in ``core/progress.py``) into a queue; ``poll()`` drains it. ``cancel()`` terminates the
+(protocol in ``core/model/progress.py``) into a queue; ``poll()`` drains it. ``cancel()`` terminates the
 process (the engine exits 130 on SIGTERM) and kills it after a grace period. A process stopped this
 way counts as cancelled however it ended: 130, or killed by the signal itself when it came before
 the engine installed its handler (still starting Python or importing), or killed after the grace
@@ -22,7 +22,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
-#: Exit code of a cancelled engine command (core/cli.py).
+#: Exit code of a cancelled engine command (core/cli/main.py).
 CANCELLED = 130
 
 

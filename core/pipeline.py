@@ -10,41 +10,41 @@ import argparse
 import time
 from pathlib import Path
 
-from . import outdir
-from .capture import load_capture
-from .joints import Articulation, read_articulation, write_articulation
-from .progress import Progress
+from .model import layout
+from .model.capture import load_capture
+from .model.joints import Articulation, read_articulation, write_articulation
+from .model.progress import Progress
 
 
 def run(capture_dir: Path, out: Path, progress: Progress, *, method: str = "motion",
         iterations: int | None = None, device: str = "auto", vlm=None) -> Articulation:
     """Run the pipeline; returns the articulation written to ``out``."""
-    from .propose import check_capture, propose_stage
-    from .reconstruct import reconstruct_stage
+    from .stages.propose.stage import check_capture, propose_stage
+    from .stages.reconstruct import reconstruct_stage
 
     start = time.perf_counter()
     progress.start("validate")
     capture = load_capture(capture_dir)
     check_capture(capture, method, vlm)
     out.mkdir(parents=True, exist_ok=True)
-    outdir.update_report(out, capture=str(capture_dir.resolve()))
+    layout.update_report(out, capture=str(capture_dir.resolve()))
     progress.finish("validate", frames=len(capture.frames), interaction=len(capture.interaction))
 
     reconstruct_stage(capture, out, progress, iterations=iterations, device=device)
     proposals = propose_stage(capture, out, progress, method=method, device=device, vlm=vlm)
 
     articulation = Articulation(proposals.joints, {**proposals.meta, "optimised": False})
-    write_articulation(out / outdir.ARTICULATION, articulation)
-    outdir.update_report(out, "run", seconds=time.perf_counter() - start,
+    write_articulation(out / layout.ARTICULATION, articulation)
+    layout.update_report(out, "run", seconds=time.perf_counter() - start,
                          joints=len(articulation.joints))
-    return read_articulation(out / outdir.ARTICULATION)
+    return read_articulation(out / layout.ARTICULATION)
 
 
 def run_command(args: argparse.Namespace, progress: Progress) -> int:
     """``artgs run``."""
     vlm = None
     if args.method == "vlm":
-        from .vlm_client import vlm_config
+        from .stages.propose.vlm.client import vlm_config
 
         vlm = vlm_config(args.vlm_endpoint, args.vlm_model, args.vlm_timeout)
     out = Path(args.out)

@@ -16,7 +16,7 @@ import bpy
 from ..artgs_addon import preferences
 from ..artgs_addon.properties import ArtgsStageState
 from ..artgs_addon.worker import Worker, WorkerResult
-from ..core.errors import ArtgsError
+from ..core.model.errors import ArtgsError
 
 #: Jobs running in the UI: (worker, timer). At most one at a time; unregister cancels them.
 _ACTIVE: list[tuple[Worker, Any]] = []

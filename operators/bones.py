@@ -10,9 +10,9 @@ from bpy.props import EnumProperty, StringProperty
 from ..artgs_addon.armature import (OUTPUT_KEY, add_joint, armature_name, build_armature,
                                     find_armature, output_key, remove_joint, save_joints)
 from ..artgs_addon.bone_props import JOINT_TYPE_ITEMS
-from ..core.errors import ArtgsError
-from ..core.joints import Articulation
-from ..core.outdir import PROPOSALS
+from ..core.model.errors import ArtgsError
+from ..core.model.joints import Articulation
+from ..core.model.layout import PROPOSALS
 
 _EDIT_MODES = ("OBJECT", "POSE", "EDIT_ARMATURE")
 

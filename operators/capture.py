@@ -12,7 +12,7 @@ import bpy
 from ..artgs_addon import preferences
 from ..artgs_addon.capture_scene import build_capture
 from ..artgs_addon.worker import WorkerResult
-from ..core.capture_preview import read_preview
+from ..core.model.capture_preview import read_preview
 from ._job import WorkerOperator, job_running
 
 PREVIEW_FILE = "capture_preview.npz"

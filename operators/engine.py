@@ -6,7 +6,7 @@ import bpy
 
 from ..artgs_addon import preferences
 from ..artgs_addon.worker import Worker
-from ..core.envcheck import missing_message, package_version
+from ..core.model.envcheck import missing_message, package_version
 
 #: The check imports torch and friends: generous, but a hung interpreter must not hang Blender.
 CHECK_TIMEOUT = 180.0

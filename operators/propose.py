@@ -10,8 +10,8 @@ from ..artgs_addon.armature import armature_name, build_armature
 from ..artgs_addon.pointcloud import points_modifier_last
 from ..artgs_addon.splat_preview import splat_preview_in
 from ..artgs_addon.worker import WorkerResult
-from ..core import outdir
-from ..core.joints import Articulation, read_articulation
+from ..core.model import layout
+from ..core.model.joints import Articulation, read_articulation
 from ._job import WorkerOperator, engine_inputs_ready
 
 _PREFS = "Preferences > Add-ons > ArtGS"
@@ -69,7 +69,7 @@ class ARTGS_OT_propose_bones(WorkerOperator, bpy.types.Operator):
 
     def finish(self, context: bpy.types.Context, result: WorkerResult) -> str:
         settings = context.scene.artgs
-        articulation = read_articulation(settings.output_path / outdir.PROPOSALS)
+        articulation = read_articulation(settings.output_path / layout.PROPOSALS)
         preview = splat_preview_in(settings.output_path, settings.splat_object)
         arm = build_armature(context, articulation, preview=preview,
                              size=object_size(preview, articulation),

@@ -10,8 +10,8 @@ from bpy.props import IntProperty, StringProperty
 from ..artgs_addon import preferences
 from ..artgs_addon.splat_preview import build_splat_preview, splat_preview_in
 from ..artgs_addon.worker import WorkerResult
-from ..core import outdir
-from ..core.errors import ArtgsError
+from ..core.model import layout
+from ..core.model.errors import ArtgsError
 from ._job import WorkerOperator, engine_inputs_ready, figures_text, job_running
 from .capture import preview_cap
 
@@ -56,7 +56,7 @@ class ARTGS_OT_reconstruct(WorkerOperator, bpy.types.Operator):
         return args
 
     def finish(self, context: bpy.types.Context, result: WorkerResult) -> str:
-        preview = load_splat_preview(context, context.scene.artgs.output_path / outdir.SPLAT)
+        preview = load_splat_preview(context, context.scene.artgs.output_path / layout.SPLAT)
         return figures_text(self._figures) or preview
 
 
@@ -74,12 +74,12 @@ class ARTGS_OT_import_splat(bpy.types.Operator):
     def poll(cls, context: bpy.types.Context) -> bool:
         settings = getattr(context.scene, "artgs", None)
         out = settings.output_path if settings else None
-        return not job_running() and out is not None and (out / outdir.SPLAT).is_file()
+        return not job_running() and out is not None and (out / layout.SPLAT).is_file()
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         settings = context.scene.artgs
         path = Path(bpy.path.abspath(self.filepath)) if self.filepath else \
-            settings.output_path / outdir.SPLAT
+            settings.output_path / layout.SPLAT
         try:
             summary = load_splat_preview(context, path)
         except (ArtgsError, OSError, ValueError) as exc:

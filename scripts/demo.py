@@ -13,9 +13,9 @@ import sys
 import time
 from pathlib import Path
 
-from artgs.core.joints import read_articulation
-from artgs.core.metrics import match_joints
-from artgs.core.synth import generate_object
+from artgs.core.model.joints import read_articulation
+from artgs.core.geometry.metrics import match_joints
+from artgs.core.synth.generate import generate_object
 
 #: Reconstruction iteration cap: enough for a recognisable splat, keeps the demo to minutes on a CPU.
 ITERATIONS = 300

@@ -23,11 +23,11 @@ from artgs.artgs_addon.armature import find_armature  # noqa: E402
 from artgs.artgs_addon.capture_scene import camera_object, pixel_aspect  # noqa: E402
 from artgs.artgs_addon.pointcloud import srgb_to_linear  # noqa: E402
 from artgs.artgs_addon.splat_preview import SH_C0  # noqa: E402
-from artgs.core.cameras import Camera, intrinsics, look_at  # noqa: E402
-from artgs.core.capture import load_capture  # noqa: E402
-from artgs.core.joints import read_articulation  # noqa: E402
-from artgs.core.ply import SplatArrays, write_ply  # noqa: E402
-from artgs.core.synth import generate_object  # noqa: E402
+from artgs.core.model.cameras import Camera, intrinsics, look_at  # noqa: E402
+from artgs.core.model.capture import load_capture  # noqa: E402
+from artgs.core.model.joints import read_articulation  # noqa: E402
+from artgs.core.model.ply import SplatArrays, write_ply  # noqa: E402
+from artgs.core.synth.generate import generate_object  # noqa: E402
 from artgs.operators.propose import ARTGS_OT_propose_bones  # noqa: E402
 
 ADDON = "artgs"
@@ -253,7 +253,7 @@ def test_import_splat_points_and_colours(scene, tmp_path):
 
 
 def test_sh_constant_matches_the_engine():
-    from artgs.core.sh import C0
+    from artgs.core.render.sh import C0
 
     assert SH_C0 == pytest.approx(C0, abs=1e-15)
 

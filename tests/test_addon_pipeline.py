@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from artgs.core.joints import read_articulation
-from artgs.core.synth import generate_object
+from artgs.core.model.joints import read_articulation
+from artgs.core.synth.generate import generate_object
 
 pytest.importorskip("bpy")
 ROOT = Path(__file__).resolve().parent.parent

@@ -13,8 +13,8 @@ from mathutils import Matrix, Vector  # noqa: E402
 
 import artgs  # noqa: E402
 from artgs.artgs_addon import armature, bone_props  # noqa: E402
-from artgs.core.errors import ArtgsError  # noqa: E402
-from artgs.core.joints import Articulation, Joint, read_articulation, write_articulation  # noqa: E402
+from artgs.core.model.errors import ArtgsError  # noqa: E402
+from artgs.core.model.joints import Articulation, Joint, read_articulation, write_articulation  # noqa: E402
 from artgs.operators import bones as bone_operators  # noqa: E402
 from artgs.panels import bones as bone_panel  # noqa: E402
 

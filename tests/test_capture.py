@@ -1,4 +1,4 @@
-"""Capture reader (core/capture.py): valid captures load exactly, every bad input is refused
+"""Capture reader (core/model/capture.py): valid captures load exactly, every bad input is refused
 naming the file, the frame and the field."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from artgs.core.capture import Capture, load_capture
-from artgs.core.cameras import look_at
-from artgs.core.errors import InputError
+from artgs.core.model.capture import Capture, load_capture
+from artgs.core.model.cameras import look_at
+from artgs.core.model.errors import InputError
 
 os.environ.setdefault("OPENCV_IO_ENABLE_OPENEXR", "1")  # before the first EXR is written
 import cv2  # noqa: E402
@@ -395,7 +395,7 @@ def test_exr_reads_in_fresh_process_even_if_cv2_imported_first(tmp_path):
     """load_capture enables OpenCV's EXR codec itself (no variable set by the caller)."""
     cap = make_capture(tmp_path / "c", depth_ext="exr")
     env = {k: v for k, v in os.environ.items() if k != "OPENCV_IO_ENABLE_OPENEXR"}
-    code = ("import sys, cv2\nfrom artgs.core.capture import load_capture\n"
+    code = ("import sys, cv2\nfrom artgs.core.model.capture import load_capture\n"
             "print(float(load_capture(sys.argv[1]).frames[2].depth[1, 3]))")
     r = subprocess.run([sys.executable, "-c", code, str(cap)], capture_output=True, text=True,
                        env=env, timeout=120)
@@ -581,8 +581,8 @@ def test_first_bad_frame_in_file_order_is_reported(cap):
 
 
 def test_synthetic_capture_loads(tmp_path):
-    """The synthetic generator's captures (core/synth.py) load with this reader."""
-    synth = pytest.importorskip("artgs.core.synth")
+    """The synthetic generator's captures (core/synth/generate.py) load with this reader."""
+    synth = pytest.importorskip("artgs.core.synth.generate")
     root = synth.generate_object(tmp_path / "cab", "cabinet", 0, width=64, height=48,
                                  static_views=4, steps=2)
     meta = json.loads((root / "transforms.json").read_text())

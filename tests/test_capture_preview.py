@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from artgs.core.capture import load_capture, summarize
-from artgs.core.capture_preview import KEYS, read_preview, write_preview
-from artgs.core.cli import main
-from artgs.core.errors import InputError
-from artgs.core.synth import generate_object
+from artgs.core.model.capture import load_capture, summarize
+from artgs.core.model.capture_preview import KEYS, read_preview, write_preview
+from artgs.core.cli.main import main
+from artgs.core.model.errors import InputError
+from artgs.core.synth.generate import generate_object
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from artgs.core.errors import InputError
-from artgs.core.joints import (Articulation, Joint, joint_transform, read_articulation,
+from artgs.core.model.errors import InputError
+from artgs.core.model.joints import (Articulation, Joint, joint_transform, read_articulation,
                                rotation_about_axis, write_articulation)
 
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from artgs.core.joints import Joint
-from artgs.core.metrics import axis_error_deg, line_distance, match_joints
+from artgs.core.model.joints import Joint
+from artgs.core.geometry.metrics import axis_error_deg, line_distance, match_joints
 
 
 def test_axis_error_is_sign_invariant():

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from artgs.core.errors import ArtgsError
-from artgs.core.joints import Joint, rotation_about_axis
-from artgs.core.parts import assign_parts
+from artgs.core.model.errors import ArtgsError
+from artgs.core.model.joints import Joint, rotation_about_axis
+from artgs.core.geometry.parts import assign_parts
 
 
 def _joint(name: str, center, half, axes=np.eye(3), extent: bool = True) -> Joint:

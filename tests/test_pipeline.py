@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from artgs.core.joints import read_articulation
-from artgs.core.metrics import match_joints
-from artgs.core.ply import read_ply
-from artgs.core.synth import generate_object
+from artgs.core.model.joints import read_articulation
+from artgs.core.geometry.metrics import match_joints
+from artgs.core.model.ply import read_ply
+from artgs.core.synth.generate import generate_object
 
 
 def _artgs(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:

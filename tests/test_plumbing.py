@@ -8,9 +8,9 @@ import sys
 
 import pytest
 
-from artgs.core import atomic
-from artgs.core.errors import Cancelled
-from artgs.core.progress import Progress
+from artgs.core.model import atomic
+from artgs.core.model.errors import Cancelled
+from artgs.core.model.progress import Progress
 
 
 def test_atomic_write_leaves_old_file_on_failure(tmp_path):
@@ -46,7 +46,7 @@ def test_json_progress_protocol_and_cancel():
 
 
 def test_cli_help_loads_no_torch_and_bad_input_exits_2(tmp_path):
-    code = ("import sys; from artgs.core.cli import build_parser; build_parser(); "
+    code = ("import sys; from artgs.core.cli.main import build_parser; build_parser(); "
             "print('torch' in sys.modules, 'bpy' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from artgs.core.errors import InputError
-from artgs.core.ply import SplatArrays, read_ply, write_ply
+from artgs.core.model.errors import InputError
+from artgs.core.model.ply import SplatArrays, read_ply, write_ply
 
 
 def _splats(n: int, degree: int, seed: int = 0) -> SplatArrays:

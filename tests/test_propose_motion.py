@@ -13,15 +13,15 @@ import cv2
 import numpy as np
 import pytest
 
-from artgs.core.capture import load_capture
-from artgs.core.joints import read_articulation
-from artgs.core.metrics import match_joints
-from artgs.core.ply import write_ply
-from artgs.core.progress import QUIET
-from artgs.core.propose import propose
-from artgs.core.propose_motion import propose_motion
-from artgs.core.reconstruct import initial_splats
-from artgs.core.synth import generate_object
+from artgs.core.model.capture import load_capture
+from artgs.core.model.joints import read_articulation
+from artgs.core.geometry.metrics import match_joints
+from artgs.core.model.ply import write_ply
+from artgs.core.model.progress import QUIET
+from artgs.core.stages.propose.stage import propose
+from artgs.core.stages.propose.motion import propose_motion
+from artgs.core.stages.reconstruct import initial_splats
+from artgs.core.synth.generate import generate_object
 
 SIZE = {"width": 96, "height": 72, "static_views": 12, "steps": 3}
 

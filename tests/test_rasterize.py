@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 import torch
 
-from artgs.core.cameras import Camera, intrinsics, look_at
-from artgs.core.device import resolve_backend, resolve_device
-from artgs.core.errors import ArtgsError
-from artgs.core import raster_reference
-from artgs.core.gaussians import Gaussians
-from artgs.core.raster_model import LOW_PASS
-from artgs.core.raster_project import quat_to_rotmat
-from artgs.core.rasterize import rasterize, render
-from artgs.core.sh import C0, sh_basis
+from artgs.core.model.cameras import Camera, intrinsics, look_at
+from artgs.core.render.device import resolve_backend, resolve_device
+from artgs.core.model.errors import ArtgsError
+from artgs.core.render import reference as raster_reference
+from artgs.core.render.gaussians import Gaussians
+from artgs.core.render.constants import LOW_PASS
+from artgs.core.render.cpu.project import quat_to_rotmat
+from artgs.core.render.rasterize import rasterize, render
+from artgs.core.render.sh import C0, sh_basis
 
 W, H = 32, 24
 K = intrinsics(30.0, 32.0, 15.5, 12.5)

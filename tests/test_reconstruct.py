@@ -9,17 +9,17 @@ import numpy as np
 import pytest
 import torch
 
-from artgs.core import outdir
-from artgs.core.capture import load_capture
-from artgs.core.cli import main
-from artgs.core.errors import Cancelled, InputError
-from artgs.core.ply import read_ply
-from artgs.core.progress import QUIET, Progress
-from artgs.core.raster_project import quat_to_rotmat
-from artgs.core.reconstruct import (ReconstructConfig, Trainer, evaluate, holdout_indices,
+from artgs.core.model import layout
+from artgs.core.model.capture import load_capture
+from artgs.core.cli.main import main
+from artgs.core.model.errors import Cancelled, InputError
+from artgs.core.model.ply import read_ply
+from artgs.core.model.progress import QUIET, Progress
+from artgs.core.render.cpu.project import quat_to_rotmat
+from artgs.core.stages.reconstruct import (ReconstructConfig, Trainer, evaluate, holdout_indices,
                                     initial_splats, make_view, reconstruct)
-from artgs.core.synth import generate_object
-from artgs.core.synth_objects import box_distance, random_spec
+from artgs.core.synth.generate import generate_object
+from artgs.core.synth.objects import box_distance, random_spec
 
 CATEGORY, SEED = "cabinet", 0
 
@@ -68,7 +68,7 @@ def test_reconstruction_quality_and_output(capture, tmp_path):
     # measured 27.6 dB / 8.3 mm (80x60 px: one pixel spans ~25 mm at the object)
     assert fig["holdout_psnr"] > 26.0
     assert fig["holdout_depth_mae_mm"] < 12.0
-    splat = read_ply(tmp_path / outdir.SPLAT)
+    splat = read_ply(tmp_path / layout.SPLAT)
     assert len(splat) == fig["gaussians"] and splat.degree == 1
     # the written splat renders the held-out views as evaluated
     params = {"means": splat.means, "quats": splat.quats, "log_scales": splat.log_scales,
@@ -116,7 +116,7 @@ def test_holdout_views_are_never_used(capture):
 
 
 def test_cancel_leaves_previous_splat(capture, tmp_path):
-    target = tmp_path / outdir.SPLAT
+    target = tmp_path / layout.SPLAT
     target.write_bytes(b"previous splat")
     calls = {"n": 0}
 
@@ -128,7 +128,7 @@ def test_cancel_leaves_previous_splat(capture, tmp_path):
         reconstruct(capture, tmp_path, Progress("quiet", cancel=cancel), iterations=200)
     assert 30 < calls["n"] < 200
     assert target.read_bytes() == b"previous splat"
-    assert sorted(p.name for p in tmp_path.iterdir()) == [outdir.SPLAT]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [layout.SPLAT]
 
 
 def test_command_writes_splat_and_report(capture_dir, tmp_path):
@@ -136,12 +136,12 @@ def test_command_writes_splat_and_report(capture_dir, tmp_path):
     code = main(["reconstruct", str(out), "--capture", str(capture_dir), "--iterations", "30",
                  "--holdout", "2", "--quiet"])
     assert code == 0
-    report = json.loads((out / outdir.REPORT).read_text())
+    report = json.loads((out / layout.REPORT).read_text())
     assert report["capture"] == str(capture_dir.resolve())
     stage = report["stages"]["reconstruct"]
     assert stage["iterations"] == 30 and stage["holdout_views"] == [2, 7]
     assert stage["seconds"] > 0 and np.isfinite(stage["holdout_psnr"])
-    assert len(read_ply(out / outdir.SPLAT)) == stage["gaussians"]
+    assert len(read_ply(out / layout.SPLAT)) == stage["gaussians"]
     # the capture recorded in the report is used when --capture is left out
     assert main(["reconstruct", str(out), "--iterations", "5", "--quiet"]) == 0
 
@@ -162,10 +162,10 @@ def test_bad_input_fails_before_any_work(capture_dir, tmp_path, capsys):
     broken = tmp_path / "broken"
     shutil.copytree(capture_dir, broken)
     next((broken / "images").iterdir()).unlink()
-    (out / outdir.SPLAT).parent.mkdir(parents=True, exist_ok=True)
-    (out / outdir.SPLAT).write_bytes(b"keep")
+    (out / layout.SPLAT).parent.mkdir(parents=True, exist_ok=True)
+    (out / layout.SPLAT).write_bytes(b"keep")
     assert main(["reconstruct", str(out), "--capture", str(broken), "--quiet"]) == 2
-    assert (out / outdir.SPLAT).read_bytes() == b"keep"
+    assert (out / layout.SPLAT).read_bytes() == b"keep"
     with pytest.raises(InputError, match="iterations"):
         reconstruct(load_capture(capture_dir), out, QUIET, iterations=0)
 
@@ -173,7 +173,7 @@ def test_bad_input_fails_before_any_work(capture_dir, tmp_path, capsys):
 def test_ssim_matches_direct_2d_window():
     import math
     import torch.nn.functional as F
-    from artgs.core.ssim import ssim
+    from artgs.core.train.ssim import ssim
     g = torch.tensor([math.exp(-(x - 5) ** 2 / (2 * 1.5 ** 2)) for x in range(11)])
     w = ((g / g.sum())[:, None] @ (g / g.sum())[None, :]).expand(3, 1, 11, 11).contiguous()
     x = torch.rand(40, 50, 3, generator=torch.Generator().manual_seed(0))
@@ -195,8 +195,8 @@ def test_ssim_matches_direct_2d_window():
 
 
 def test_densify_clones_splits_and_prunes():
-    from artgs.core.adam import Adam
-    from artgs.core.densify import DensifyConfig, Densifier
+    from artgs.core.train.adam import Adam
+    from artgs.core.train.densify import DensifyConfig, Densifier
     n = 6
     params = {"means": torch.zeros(n, 3), "quats": torch.tensor([[1.0, 0, 0, 0]] * n),
               "log_scales": torch.log(torch.tensor([[0.005] * 3, [0.05] * 3, [0.005] * 3,

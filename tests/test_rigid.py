@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from artgs.core.joints import joint_transform
-from artgs.core.metrics import axis_error_deg, line_distance
-from artgs.core.rigid import apply, fit_joint, icp, kabsch, robust_kabsch, rotation_log, screw_axis
+from artgs.core.model.joints import joint_transform
+from artgs.core.geometry.metrics import axis_error_deg, line_distance
+from artgs.core.geometry.rigid import apply, fit_joint, icp, kabsch, robust_kabsch, rotation_log, screw_axis
 
 
 def _box_surface(rng: np.random.Generator, size=(0.4, 0.02, 0.6), n=3000) -> np.ndarray:

@@ -12,11 +12,11 @@ import pytest
 import trimesh
 import yourdfpy
 
-from artgs.core.capture import load_capture
-from artgs.core.cli import CATEGORIES, main
-from artgs.core.joints import read_articulation
-from artgs.core.synth import generate_object, generate_set
-from artgs.core.synth_objects import box_distance, random_spec
+from artgs.core.model.capture import load_capture
+from artgs.core.cli.main import CATEGORIES, main
+from artgs.core.model.joints import read_articulation
+from artgs.core.synth.generate import generate_object, generate_set
+from artgs.core.synth.objects import box_distance, random_spec
 
 SMALL = dict(width=64, height=48, static_views=4, steps=3, simultaneous=True)
 

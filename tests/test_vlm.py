@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 import torch
 
-from artgs.core import lift
-from artgs.core.cameras import Camera, intrinsics, look_at
-from artgs.core.capture import Capture
-from artgs.core.errors import ArtgsError, InputError
-from artgs.core.propose_vlm import box_within
-from artgs.core.vlm_client import VlmConfig, chat, user_message, vlm_config
-from artgs.core.vlm_parse import parse_classification, parse_handle, parse_parts, to_grid1000
+from artgs.core.geometry import lift
+from artgs.core.model.cameras import Camera, intrinsics, look_at
+from artgs.core.model.capture import Capture
+from artgs.core.model.errors import ArtgsError, InputError
+from artgs.core.stages.propose.vlm.propose import box_within
+from artgs.core.stages.propose.vlm.client import VlmConfig, chat, user_message, vlm_config
+from artgs.core.stages.propose.vlm.parse import parse_classification, parse_handle, parse_parts, to_grid1000
 
 W, H = 160, 120
 
@@ -408,9 +408,9 @@ def test_snap_axis_only_within_its_angle():
 
 
 def test_up_direction_from_level_cameras_with_and_without_spread():
-    from artgs.core.capture import Frame
-    from artgs.core.joints import rotation_about_axis
-    from artgs.core.propose_vlm import up_direction
+    from artgs.core.model.capture import Frame
+    from artgs.core.model.joints import rotation_about_axis
+    from artgs.core.stages.propose.vlm.propose import up_direction
 
     R = np.eye(4)
     R[:3, :3] = rotation_about_axis(np.array([0.2, 1.0, 0.4]), 2.2)  # a world that is not z-up
@@ -440,11 +440,11 @@ def test_up_direction_from_level_cameras_with_and_without_spread():
 @pytest.fixture(scope="module")
 def cabinet(tmp_path_factory):
     """A synthetic cabinet (door + drawer), its ground truth and a depth-initialised static splat."""
-    from artgs.core.capture import load_capture
-    from artgs.core.gaussians import Gaussians
-    from artgs.core.joints import read_articulation
-    from artgs.core.reconstruct import initial_splats
-    from artgs.core.synth import generate_object
+    from artgs.core.model.capture import load_capture
+    from artgs.core.render.gaussians import Gaussians
+    from artgs.core.model.joints import read_articulation
+    from artgs.core.stages.reconstruct import initial_splats
+    from artgs.core.synth.generate import generate_object
 
     root = generate_object(tmp_path_factory.mktemp("vlm") / "cabinet", "cabinet", 3, width=W,
                            height=H, static_views=12, steps=2)
@@ -525,8 +525,8 @@ def _tilted(capture, gaussians, gt, T: np.ndarray):
     """The same scene in another world frame: ``T`` (4x4 rigid) applied to cameras, splat and gt."""
     import dataclasses
 
-    from artgs.core.gaussians import Gaussians
-    from artgs.core.joints import Joint
+    from artgs.core.render.gaussians import Gaussians
+    from artgs.core.model.joints import Joint
 
     R, t = T[:3, :3], T[:3, 3]
     frames = [dataclasses.replace(f, camera=Camera(f.camera.K, T @ f.camera.c2w, f.camera.width,
@@ -554,10 +554,10 @@ def _level(v, up):
 def test_propose_vlm_end_to_end_recovers_the_ground_truth_joints(cabinet, world):
     import io
 
-    from artgs.core.joints import rotation_about_axis
-    from artgs.core.metrics import match_joints
-    from artgs.core.progress import Progress
-    from artgs.core.propose_vlm import frontal_camera, propose_vlm, up_direction
+    from artgs.core.model.joints import rotation_about_axis
+    from artgs.core.geometry.metrics import match_joints
+    from artgs.core.model.progress import Progress
+    from artgs.core.stages.propose.vlm.propose import frontal_camera, propose_vlm, up_direction
 
     capture, gaussians, gt = cabinet
     up = np.array([0, 0, 1.0])
@@ -607,8 +607,8 @@ def test_propose_vlm_end_to_end_recovers_the_ground_truth_joints(cabinet, world)
 def test_propose_vlm_skips_an_unparseable_part_and_keeps_the_others(cabinet):
     import io
 
-    from artgs.core.progress import Progress
-    from artgs.core.propose_vlm import frontal_camera, propose_vlm
+    from artgs.core.model.progress import Progress
+    from artgs.core.stages.propose.vlm.propose import frontal_camera, propose_vlm
 
     capture, gaussians, gt = cabinet
     camera = frontal_camera(capture, gaussians.means.numpy().astype(float), W, H)
@@ -630,8 +630,8 @@ def test_propose_vlm_skips_an_unparseable_part_and_keeps_the_others(cabinet):
 def test_a_handle_beside_the_hinge_line_lowers_confidence(cabinet):
     import io
 
-    from artgs.core.progress import Progress
-    from artgs.core.propose_vlm import frontal_camera, propose_vlm
+    from artgs.core.model.progress import Progress
+    from artgs.core.stages.propose.vlm.propose import frontal_camera, propose_vlm
 
     capture, gaussians, gt = cabinet
     camera = frontal_camera(capture, gaussians.means.numpy().astype(float), W, H)

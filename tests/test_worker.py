@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from artgs.artgs_addon.worker import CANCELLED, Worker, parse_line, worker_command
-from artgs.core import envcheck
-from artgs.core.progress import Progress
+from artgs.core.model import envcheck
+from artgs.core.model.progress import Progress
 
 ENGINE = sys.executable
 

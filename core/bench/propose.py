@@ -1,0 +1,121 @@
+"""``artgs bench-propose``: accuracy of the motion route per category on synthetic captures.
+
+For each capture (generated with core.synth into a temporary folder, or taken from ``--data``):
+initialise the static splat from the static views (core.reconstruct.initial_splats, or optimise
+it with core.reconstruct.reconstruct for ``--iterations``), run the motion route
+(core.propose.propose) and score it against ``gt.json`` (core.metrics.match_joints).
+Prints per category: joints, type accuracy, AE mean/worst (deg), OE mean/worst (cm, revolute
+joints), seconds per capture; then overall.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..model.capture import load_capture
+from ..model.errors import InputError
+from ..model.joints import read_articulation
+from ..geometry.metrics import match_joints
+from ..model.ply import write_ply
+from ..model.progress import QUIET, Progress
+
+
+def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0
+                  ) -> dict:
+    """Propose joints for one synthetic capture and score them against its gt.json.
+
+    The static splat is the depth-initialised one, or optimised for ``iterations`` iterations.
+    """
+    from ..stages.propose.stage import propose
+    from ..stages.reconstruct import initial_splats, reconstruct
+
+    capture = load_capture(capture_dir)
+    gt = read_articulation(capture_dir / "gt.json")
+    out = work / capture_dir.name
+    out.mkdir(parents=True, exist_ok=True)
+    if iterations > 0:
+        reconstruct(capture, out, QUIET, iterations=iterations, device=device)
+    else:
+        write_ply(out / "splat.ply", initial_splats(capture.static)[0])
+    t0 = time.perf_counter()
+    art = propose(capture, out, QUIET, method="motion", device=device)
+    seconds = time.perf_counter() - t0
+    scores = match_joints(art.joints, gt.joints)
+    return {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name),
+            "seconds": seconds, "predicted": len(art.joints),
+            "scores": [{"joint": s.true_name, "pred": s.pred_name, "type_ok": s.type_correct,
+                        "ae": s.axis_error_deg, "oe": s.origin_error_cm} for s in scores]}
+
+
+def summarize(results: list[dict]) -> list[dict]:
+    """Rows per category plus an ``overall`` row."""
+    rows = []
+    cats = sorted({r["category"] for r in results})
+    for name, group in [(c, [r for r in results if r["category"] == c]) for c in cats] + \
+            [("overall", results)]:
+        scores = [s for r in group for s in r["scores"]]
+        ae = [s["ae"] for s in scores]
+        oe = [s["oe"] for s in scores if s["oe"] is not None]
+        rows.append({"category": name, "captures": len(group), "joints": len(scores),
+                     "type_acc": sum(s["type_ok"] for s in scores) / max(len(scores), 1),
+                     "ae_mean": float(np.mean(ae)) if ae else math.nan,
+                     "ae_max": max(ae) if ae else math.nan,
+                     "oe_mean": float(np.mean(oe)) if oe else math.nan,
+                     "oe_max": max(oe) if oe else math.nan,
+                     "seconds": float(np.mean([r["seconds"] for r in group]))})
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    head = (f"{'category':<13}{'caps':>5}{'joints':>7}{'type':>7}{'AE mean':>9}{'AE max':>8}"
+            f"{'OE mean':>9}{'OE max':>8}{'s/cap':>7}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        def f(v: float, w: int, p: int) -> str:
+            return f"{'-':>{w}}" if math.isnan(v) else f"{v:>{w}.{p}f}"
+        lines.append(f"{r['category']:<13}{r['captures']:>5}{r['joints']:>7}"
+                     f"{100 * r['type_acc']:>6.0f}%{f(r['ae_mean'], 9, 2)}{f(r['ae_max'], 8, 2)}"
+                     f"{f(r['oe_mean'], 9, 2)}{f(r['oe_max'], 8, 2)}{r['seconds']:>7.1f}")
+    return "\n".join(lines)
+
+
+def bench_propose_command(args, progress: Progress) -> int:
+    """``artgs bench-propose [--data DIR] [--per-category N] [--seed S] [--depth-noise s]
+    [--simultaneous] [--category C ...] [--width W --height H] [--iterations N]``."""
+    with tempfile.TemporaryDirectory(prefix="artgs-bench-propose-") as tmp:
+        tmp = Path(tmp)
+        if args.data:
+            data = Path(args.data)
+            captures = sorted(p.parent for p in data.glob("*/gt.json"))
+            if not captures:
+                raise InputError(data, "no capture folders with gt.json inside (make one with "
+                                 "`artgs synth`)")
+        else:
+            from ..synth.generate import generate_set
+            captures = generate_set(tmp / "data", args.category, args.per_category, args.seed,
+                                    progress, width=args.width, height=args.height,
+                                    depth_noise=args.depth_noise,
+                                    simultaneous=args.simultaneous)
+        progress.start("bench-propose", f"{len(captures)} captures")
+        results = []
+        for k, cap in enumerate(captures):
+            r = bench_capture(Path(cap), tmp / "out", args.device, args.iterations)
+            results.append(r)
+            worst = max((s["ae"] for s in r["scores"]), default=0.0)
+            progress.update("bench-propose", (k + 1) / len(captures), r["capture"],
+                            seconds=round(r["seconds"], 1), worst_ae=round(worst, 2))
+        rows = summarize(results)
+        progress.finish("bench-propose", captures=len(captures))
+    if progress.mode == "json":
+        progress.finished(rows=json.dumps(rows), results=json.dumps(results))
+    else:
+        print(f"depth noise {args.depth_noise} m, simultaneous {args.simultaneous}, "
+              f"splat iterations {args.iterations}, {len(captures)} captures")
+        print(format_table(rows))
+    return 0
