@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..model.capture import load_capture
-from ..cli.main import CATEGORIES
+from ..model.categories import CATEGORIES
 from ..model.errors import InputError
 from ..model.progress import Progress
 from ..stages.reconstruct import ReconstructConfig, reconstruct

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..model import atomic
 from ..model.cameras import Camera, intrinsics, look_at
-from ..cli.main import CATEGORIES
+from ..model.categories import CATEGORIES
 from ..model.errors import InputError
 from ..model.joints import Articulation, Joint, write_articulation
 from ..model.progress import QUIET, Progress
