@@ -1,7 +1,6 @@
 """``artgs run CAPTURE --out OUT``: every stage that exists, in order, on one capture.
 
-validate -> reconstruct -> propose. Until an optimisation stage exists the proposals are also
-written as ``articulation.json`` so the whole output contract can be exercised end to end.
+validate -> reconstruct -> propose -> optimise.
 """
 
 from __future__ import annotations
@@ -12,7 +11,7 @@ from pathlib import Path
 
 from .model import layout
 from .model.capture import load_capture
-from .model.joints import Articulation, read_articulation, write_articulation
+from .model.joints import Articulation, read_articulation
 from .model.progress import Progress
 
 
@@ -20,6 +19,7 @@ def run(capture_dir: Path, out: Path, progress: Progress, *, method: str = "moti
         iterations: int | None = None, device: str = "auto", vlm=None) -> Articulation:
     """Run the pipeline; returns the articulation written to ``out``."""
     from .stages.propose.stage import check_capture, propose_stage
+    from .stages.optimise.stage import OptimiseOptions, optimise_stage
     from .stages.reconstruct import reconstruct_stage
 
     start = time.perf_counter()
@@ -31,10 +31,9 @@ def run(capture_dir: Path, out: Path, progress: Progress, *, method: str = "moti
     progress.finish("validate", frames=len(capture.frames), interaction=len(capture.interaction))
 
     reconstruct_stage(capture, out, progress, iterations=iterations, device=device)
-    proposals = propose_stage(capture, out, progress, method=method, device=device, vlm=vlm)
-
-    articulation = Articulation(proposals.joints, {**proposals.meta, "optimised": False})
-    write_articulation(out / layout.ARTICULATION, articulation)
+    propose_stage(capture, out, progress, method=method, device=device, vlm=vlm)
+    optimise_stage(out, capture, progress, OptimiseOptions(device=device))
+    articulation = read_articulation(out / layout.ARTICULATION)
     layout.update_report(out, "run", seconds=time.perf_counter() - start,
                          joints=len(articulation.joints))
     return read_articulation(out / layout.ARTICULATION)

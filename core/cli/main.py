@@ -29,6 +29,8 @@ _COMMANDS: dict[str, str] = {
     "run": "pipeline:run_command",
     "reconstruct": "stages.reconstruct:reconstruct_command",
     "propose": "stages.propose.stage:propose_command",
+    "optimise": "stages.optimise.stage:optimise_command",
+    "bench-optimise": "bench.optimise:bench_optimise_command",
     "check-env": "model.envcheck:check_env_command",
     "bench-render": "bench.render:bench_render_command",
     "bench-reconstruct": "bench.reconstruct:bench_reconstruct_command",
@@ -112,6 +114,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("motion", "vlm"), default="motion")
     _device(p)
     _vlm(p)
+    _common(p)
+
+    p = sub.add_parser("optimise", help="fit joints, states and parts to the interaction frames "
+                       "-> OUT/articulation.json, OUT/part_labels.npy")
+    p.add_argument("out")
+    p.add_argument("--capture", default=None, help="capture folder (default: the one recorded in OUT)")
+    p.add_argument("--iterations", type=int, default=300, help="steps of the main fit")
+    p.add_argument("--no-types", action="store_true", help="keep the proposals' joint types")
+    p.add_argument("--no-parts", action="store_true", help="neither add nor remove parts")
+    p.add_argument("--seed", type=int, default=0)
+    _device(p)
     _common(p)
 
     p = sub.add_parser("check-env", help="check that the engine has every dependency")

@@ -37,18 +37,20 @@ class FitConfig:
     lr_states: float = 0.01
     lr_logits: float = 0.1
     lr_final: float = 0.05             # learning rates decay exponentially to this fraction
+    widen: float = 10.0                # robust sigmas at the start of the coarse phase, x
     coarse: float = 0.4                # fraction of the first fit's steps at the coarsest level
     backend: str = "auto"
 
 
 def frame_loss(model: ArticulatedSplat, frames: FrameSet, level: int, i: int,
-               cfg: FitConfig) -> torch.Tensor:
-    """Image loss of frame ``i`` at pyramid ``level``."""
+               cfg: FitConfig, widen: float = 1.0) -> torch.Tensor:
+    """Image loss of frame ``i`` at pyramid ``level``; ``widen`` scales the robust loss's
+    sigmas (large: L1-like, every pixel pulls)."""
     v = frames.levels[level][i]
     r = model.render(v, frames.time_index[i], cfg.backend)
-    return robust_image_loss(r, v, depth_unit=0.01 * model.size, sigma_rgb=cfg.sigma_rgb,
-                             sigma_depth=cfg.sigma_depth, sigma_alpha=cfg.sigma_alpha,
-                             lambda_ssim=cfg.lambda_ssim)
+    return robust_image_loss(r, v, depth_unit=0.01 * model.size, sigma_rgb=cfg.sigma_rgb * widen,
+                             sigma_depth=cfg.sigma_depth * widen,
+                             sigma_alpha=cfg.sigma_alpha * widen, lambda_ssim=cfg.lambda_ssim)
 
 
 @torch.no_grad()
@@ -87,10 +89,13 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         decay = cfg.lr_final ** (step / steps)
         for name in opt.lrs:
             opt.lrs[name] = lrs[name] * decay
-        level = coarse_level if step < coarse * steps else 0
+        in_coarse = step < coarse * steps
+        level = coarse_level if in_coarse else 0
+        # graduated robustness: the coarse phase starts L1-like (wide basin) and tightens
+        widen = cfg.widen ** (1 - step / (coarse * steps)) if in_coarse else 1.0
         ti = int(rng.choice(pool))
         ids = frames.at_time(ti)
-        loss = sum(frame_loss(model, frames, level, i, cfg) for i in ids) / max(len(ids), 1)
+        loss = sum(frame_loss(model, frames, level, i, cfg, widen) for i in ids) / max(len(ids), 1)
         smooth, entropy = model.skin_regularisers()
         loss = loss + cfg.lambda_smooth * smooth + cfg.lambda_entropy * entropy \
             + cfg.lambda_temporal * model.temporal()

@@ -191,3 +191,19 @@ class ArticulatedSplat:
             v = np.asarray([values[t] for t in self.times] if isinstance(values, dict)
                            else values, float)
             self.states[k] = torch.as_tensor(v / self.unit_of(kind), dtype=torch.float32)
+
+    def drop(self, k: int) -> None:
+        """Remove joint ``k``; its Gaussians join the base."""
+        keep = [i for i in range(self.k) if i != k]
+        cols = [0] + [i + 1 for i in keep]
+        with torch.no_grad():
+            for name in ("axes", "origins", "axes0", "origins0", "states"):
+                setattr(self, name, getattr(self, name).detach()[keep].clone())
+            self.locked = self.locked[keep]
+            self.logits = self.logits.detach()[:, cols].clone()
+            if self.hard is not None:
+                h = self.hard.clone()
+                h[self.hard == k + 1] = 0
+                h[self.hard > k + 1] -= 1
+                self.hard = h
+        del self.names[k], self.types[k]

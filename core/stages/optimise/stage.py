@@ -253,3 +253,32 @@ def run(out: Path, capture: Capture | None, options: OptimiseOptions,
     """The stage function of the registry: optimise and return the figures."""
     check_inputs(Path(out), capture)
     return optimise(out, capture, progress, options)
+
+
+def optimise_stage(out: str | Path, capture: Capture, progress: Progress,
+                   options: OptimiseOptions | None = None) -> dict[str, Any]:
+    """:func:`optimise` as a pipeline stage: progress start/finish and its report.json entry."""
+    progress.start(STAGE, "fitting joints to the interaction frames")
+    figures = optimise(out, capture, progress, options)
+    seconds = progress.finish(STAGE, joints=figures["joints"], loss=figures["loss"])
+    layout.update_report(out, STAGE, **{**figures, "seconds": round(seconds, 2)})
+    return figures
+
+
+def optimise_command(args, progress: Progress) -> int:
+    """``artgs optimise OUT [--capture C] [--iterations N] [--no-types] [--no-parts]``."""
+    from ...model.capture import load_capture
+    out = Path(args.out)
+    layout.require(out, layout.SPLAT, "reconstruct")
+    layout.require(out, layout.PROPOSALS, "propose")
+    capture = load_capture(layout.capture_of(out, args.capture))
+    options = OptimiseOptions(iterations=args.iterations, types=not args.no_types,
+                              parts=not args.no_parts, device=args.device, seed=args.seed)
+    optimise_stage(out, capture, progress, options)
+    for j in read_articulation(out / layout.ARTICULATION).joints:
+        progress.log(f"{j.name}: {j.type} axis {np.round(j.axis, 4).tolist()} origin "
+                     f"{np.round(j.origin, 4).tolist()} limit [{j.limit[0]:.3f}, "
+                     f"{j.limit[1]:.3f}] confidence {j.confidence}")
+    progress.finished(articulation=str(out / layout.ARTICULATION),
+                      part_labels=str(out / layout.PART_LABELS))
+    return 0
