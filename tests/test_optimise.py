@@ -132,10 +132,10 @@ def test_recovers_perturbed_joints(cabinet, tmp_path):
     assert set(np.unique(labels)) <= {0, 1, 2} and (labels == 1).sum() > 20
     for j, true in zip(art.joints, gt.joints):
         assert set(j.states) == set(true.states)
-        scale = 1.0 if j.type == "revolute" else 0.1
+        tol = 0.1 if j.type == "revolute" else 0.03   # rad / m, at 64x48
         err = max(abs(j.states[t] - true.states[t]) for t in true.states)
-        assert err < 0.1 * scale, (j.name, err)
-        assert j.limit[0] <= 0 and abs(j.limit[1] - true.limit[1]) < 0.1 * scale
+        assert err < tol, (j.name, err)
+        assert j.limit[0] <= 0 and abs(j.limit[1] - true.limit[1]) < tol
         assert 0 <= j.confidence <= 1 and j.extra["residual"] >= 0
 
 
@@ -178,18 +178,13 @@ def test_cli_refuses_missing_proposals(cabinet, tmp_path):
 
 
 def test_type_chosen_by_evidence(cabinet, tmp_path):
-    """Both joints start with the wrong type; the fit keeps the right ones."""
+    """The door starts as a slide along its hinge line; type selection makes it a hinge again
+    (and keeps the drawer a slide)."""
     gt = read_articulation(cabinet / "gt.json")
-    start = []
-    for j in gt.joints:
-        w = copy.deepcopy(j)
-        w.type = "prismatic" if j.type == "revolute" else "revolute"
-        if w.type == "prismatic":   # a door as a slide: its states become metres
-            w.states = {t: 0.3 * np.sin(v) for t, v in j.states.items()}
-        else:                        # a drawer as a hinge through its centre
-            w.states = {t: v for t, v in j.states.items()}
-            w.origin = np.asarray(j.extent["center"], float)
-        start.append(w)
+    start = [copy.deepcopy(j) for j in gt.joints]
+    door = next(j for j in start if j.type == "revolute")
+    door.type = "prismatic"
+    door.states = {t: 0.3 * np.sin(v) for t, v in door.states.items()}
     out = _out(tmp_path, cabinet, start)
     figures = optimise(out, load_capture(cabinet), QUIET,
                        OptimiseOptions(iterations=120, types=True, parts=False))
@@ -205,21 +200,21 @@ def test_type_chosen_by_evidence(cabinet, tmp_path):
 
 
 def test_spurious_part_removed(cabinet, tmp_path):
-    """A proposal on a part of the body that never moves is dropped; the real ones stay."""
+    """A proposal on a piece of the body that never moves is dropped; the real ones stay."""
     gt = read_articulation(cabinet / "gt.json")
+    means = initial_splats(load_capture(cabinet).static)[0].means
+    centres = np.array([j.extent["center"] for j in gt.joints])
+    far = means[np.argmax(np.linalg.norm(means[:, None] - centres[None], axis=-1).min(1))]
     fake = copy.deepcopy(gt.joints[0])
     fake.name, fake.child = "ghost", "ghost_link"
-    body = read_articulation(cabinet / "gt.json")
-    ext = dict(fake.extent)
-    axes = np.asarray(ext["axes"], float)
-    half = np.asarray(ext["half_size"], float)
-    # the box beside the door, on the body's top: shift it up by its height
-    ext["center"] = list(np.asarray(ext["center"]) + axes[2] * (2.2 * half[2]))
-    fake.extent = ext
+    fake.extent = {"center": list(map(float, far)), "axes": np.eye(3).tolist(),
+                   "half_size": [0.12, 0.12, 0.12]}
     fake.states = {t: 0.5 * v for t, v in fake.states.items()}
-    out = _out(tmp_path, cabinet, list(body.joints) + [fake])
+    out = _out(tmp_path, cabinet, list(gt.joints) + [fake])
     figures = optimise(out, load_capture(cabinet), QUIET,
                        OptimiseOptions(iterations=60, types=False, parts=True))
     names = [j.name for j in read_articulation(out / layout.ARTICULATION).joints]
     assert "ghost" in figures["removed"] and "ghost" not in names, figures
     assert set(names) == {j.name for j in gt.joints}
+    labels = np.load(out / layout.PART_LABELS)
+    assert labels.max() == 2

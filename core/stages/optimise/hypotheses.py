@@ -1,10 +1,8 @@
 """Choosing, adding and dropping joints by evidence (the image loss), beyond the paper.
 
-- Type: for each joint the alternative type is made from the fitted motion of its part
-  (revolute -> prismatic: the principal direction of the part's mean displacements; prismatic ->
-  revolute: every edge of the part's box as a hinge, each with the per-time angles that best
-  reproduce the fitted part positions), the best few are scored by rendering, the winner is
-  fitted, and the hypothesis with the lower image loss over the frames where the part moves is kept.
+- Type: for each joint, hypotheses of the other type are made from its part (box edges as
+  hinges, box axes as slides, and the fitted motion transferred), scored by rendering, the best
+  one fitted, and the type with the lower image loss over the frames where the part moves is kept.
 - Spurious parts: a part whose removal (its Gaussians to the base) does not raise the image loss
   over all frames is removed.
 """
@@ -25,9 +23,10 @@ REMOVE_TOL = 1e-3
 
 
 def state_candidates(model: ArticulatedSplat, k: int) -> np.ndarray:
-    """Values searched for a joint without states: ±90° in 15° steps, or ±40 % of the object size."""
+    """Values searched for a joint without states: ±120° in 15° steps, or ±40 % of the object
+    size in 5 % steps."""
     if model.types[k] == REVOLUTE:
-        return np.radians(np.linspace(-90, 90, 13))
+        return np.radians(np.linspace(-120, 120, 17))
     return np.linspace(-0.4, 0.4, 17) * model.size
 
 
@@ -57,6 +56,22 @@ def posed_part(model: ArticulatedSplat, k: int, pts: np.ndarray) -> np.ndarray:
         T = joint_transform(model.types[k], axis, origin, v)
         out.append(pts @ T[:3, :3].T + T[:3, 3])
     return np.stack(out)
+
+
+def part_normal(model: ArticulatedSplat, k: int) -> np.ndarray:
+    """Mean surface normal of part ``k``: each Gaussian's shortest axis, signs aligned."""
+    s = model.splat
+    sel = torch.as_tensor(model.labels() == k + 1, device=s.means.device)
+    q = s.quats[sel] / s.quats[sel].norm(dim=-1, keepdim=True)
+    w, x, y, z = q.unbind(-1)
+    R = torch.stack([torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                     torch.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                     torch.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)],
+                    -2)
+    shortest = s.log_scales[sel].argmin(-1)
+    n = R[torch.arange(len(q)), :, shortest].cpu().numpy().astype(float)
+    # principal direction of the normals (sign-free), as the eigenvector of their scatter
+    return np.linalg.eigh(n.T @ n)[1][:, -1]
 
 
 def box_edges(pts: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -97,9 +112,14 @@ def revolute_from_motion(pts: np.ndarray, posed: np.ndarray, axis: np.ndarray, p
 
 
 def alternatives(model: ArticulatedSplat, k: int) -> list[tuple[str, np.ndarray, np.ndarray,
-                                                               np.ndarray, float]]:
-    """Hypotheses of the other type for joint ``k``, made from its part's fitted motion:
-    (type, axis, point, values per time, point residual), best first."""
+                                                               np.ndarray | None]]:
+    """Hypotheses of the other type for joint ``k``: (type, axis, point, values per time or None).
+
+    Revolute -> prismatic: the principal direction of the part's fitted mean displacements (with
+    its values), the part's mean surface normal (drawers slide along their front's normal), the
+    part box's and the object box's axes. Prismatic -> revolute: every edge of the part's
+    box as a hinge, with the per-time angles that best reproduce the fitted part positions.
+    """
     pts = part_points(model, k)
     if len(pts) < 10:
         return []
@@ -111,15 +131,41 @@ def alternatives(model: ArticulatedSplat, k: int) -> list[tuple[str, np.ndarray,
         values = disp @ axis
         if values[np.argmax(np.abs(values))] < 0:
             axis, values = -axis, -values
-        res = float((((pts[None] + values[:, None, None] * axis) - posed) ** 2).sum(-1).mean())
-        return [(PRISMATIC, axis, pts.mean(0), values, res)]
+        directions = [axis, part_normal(model, k)]
+        for p in (pts, model.splat.means.cpu().numpy()):   # the part's and the object's box axes
+            directions += list(np.linalg.svd(p - p.mean(0), full_matrices=False)[2])
+        return [(PRISMATIC, d, pts.mean(0), values if i == 0 else None)
+                for i, d in enumerate(directions)]
     hyps = []
     for axis, point in box_edges(pts):
-        values, res = revolute_from_motion(pts, posed, axis, point)
+        values, _ = revolute_from_motion(pts, posed, axis, point)
         if values[np.argmax(np.abs(values))] < 0:
             axis, values = -axis, -values
-        hyps.append((REVOLUTE, axis, point, values, res))
-    return sorted(hyps, key=lambda h: h[4])
+        hyps.append((REVOLUTE, axis, point, values))
+    return hyps
+
+
+def score_level(frames) -> int:
+    """Pyramid level of hypothesis scoring: half resolution (the coarsest can be too small to
+    see a part's motion)."""
+    return min(1, len(frames.levels) - 1)
+
+
+@torch.no_grad()
+def score_at(model: ArticulatedSplat, frames, cfg, k: int, ti: int, values: np.ndarray) -> \
+        tuple[float, float]:
+    """Lowest image loss (half resolution) at time index ``ti`` over joint ``k``'s candidate ``values``
+    (rad / m), and the value reaching it."""
+    from .fit import frame_loss
+    level = score_level(frames)
+    ids = frames.at_time(ti)
+    unit = model.unit_of(model.types[k])
+    best = (np.inf, 0.0)
+    for v in values:
+        model.states[k, ti] = float(v) / unit
+        loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids) / len(ids)
+        best = min(best, (loss, float(v)))
+    return best
 
 
 def moving_frames(model: ArticulatedSplat, frames, k: int) -> list[int]:
@@ -130,18 +176,36 @@ def moving_frames(model: ArticulatedSplat, frames, k: int) -> list[int]:
     return [i for i, ti in enumerate(frames.time_index) if v[ti] > 0.1 * v.max()]
 
 
-def select_types(run, share: float, fixed: list[bool], tries: int = 3) -> dict[str, dict[str, Any]]:
+@torch.no_grad()
+def key_time(model: ArticulatedSplat, frames, cfg, k: int) -> int:
+    """The time index where joint ``k`` at rest (others as fitted) explains the frames worst:
+    where its part is furthest from closed, whatever the current hypothesis says."""
+    from .fit import frame_loss
+    level = score_level(frames)
+    snap = _snapshot(model)
+    model.states = model.states.clone()
+    model.states[k] = 0.0
+    per_time = np.zeros(len(frames.times))
+    for i, ti in enumerate(frames.time_index):
+        per_time[ti] += float(frame_loss(model, frames, level, i, cfg))
+    _restore(model, snap)
+    return int(np.argmax(per_time))
+
+
+def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[str, dict[str, Any]]:
     """Keep, per joint, the type whose fit explains the frames where it moves better.
 
-    ``fixed`` joints (trusted user joints, locked joints) keep their type. The ``tries`` best
-    alternatives (by point residual) are scored by rendering; the best one is fitted with only
-    this joint free and kept if its image loss is lower. Returns per joint the evidence:
+    ``fixed`` joints (trusted user joints, locked joints) keep their type. Each alternative
+    (:func:`alternatives`) is scored by rendering at half resolution at the time the part
+    moves most (its value searched); the best one gets its states searched at every time, is
+    fitted coarse-to-fine with only this joint free, and is kept
+    if its image loss over the frames where the part moves is lower. Returns per joint the evidence:
     both losses, the kept type and the relative margin.
     """
     model, frames, cfg = run.model, run.frames, run.cfg
     evidence: dict[str, dict[str, Any]] = {}
     todo = [k for k in range(model.k) if not fixed[k]]
-    steps = max(run.options.iterations // 3, 1)
+    steps = max(run.options.iterations // 2, 1)
     for k in todo:
         name = model.names[k]
         ids = moving_frames(model, frames, k)
@@ -151,16 +215,23 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 3) -> dict[s
             continue
         kept = _snapshot(model)
         here = float(evaluate(model, frames, cfg, 0, ids).mean())
+        key = key_time(model, frames, cfg, k)
         scored = []
-        for kind, axis, point, values, _ in hyps[:tries]:
-            model.set_type(k, kind, axis, point, values)
-            scored.append((float(evaluate(model, frames, cfg, 0, ids).mean()), axis, point, values))
+        for kind, axis, point, values in hyps[:tries]:
+            model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+            grid = state_candidates(model, k)
+            if values is not None:
+                grid = np.append(grid, values[key])
+            loss, value = score_at(model, frames, cfg, k, key, grid)
+            scored.append((loss, axis, point, values))
             _restore(model, kept)
+            run.progress.check_cancel()
         _, axis, point, values = min(scored, key=lambda s: s[0])
         kind = hyps[0][0]
-        model.set_type(k, kind, axis, point, values)
+        model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+        search_states(model, frames, k, cfg, state_candidates(model, k))
         run.run_fit(steps, f"{name} as {kind}", share / len(todo),
-                    free=[i == k for i in range(model.k)])
+                    free=[i == k for i in range(model.k)], coarse=cfg.coarse)
         there = float(evaluate(model, frames, cfg, 0, ids).mean())
         losses = {kept[0][k]: here, kind: there}
         if there >= here:

@@ -9,9 +9,9 @@ behind them). Nothing is written before the end: a cancel or a failure leaves OU
 Steps (each fit is :func:`.fit.fit`):
 1. start from the proposals: part of each Gaussian from the joints' ``extent`` boxes; states
    from the proposal or, where it has none, a search per time;
-2. fit axes, points, states and soft skinning together (coarse-to-fine);
-3. harden the assignment (argmax), fine-tune joints and states;
-4. type by evidence and spurious parts (:mod:`.hypotheses`), missed parts;
+2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
+3. type by evidence, then spurious parts (:mod:`.hypotheses`);
+4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
 5. report per joint residual, observed range and confidence.
 """
 
@@ -149,22 +149,24 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                  f"{len(frames.time_index)} frames at {len(frames.times)} times, "
                  f"size {size:.3f} m")
 
+    model.hard = torch.as_tensor(labels, device=dev)       # the boxes' parts, until step 4
     for k, j in enumerate(joints):
         if not j.states:
             search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
-    run.run_fit(n, "joints and skinning", 0.45, coarse=cfg.coarse)
-    model.harden()
-    run.run_fit(max(n // 3, 1), "hardened", 0.15)
+    run.run_fit(max(n // 2, 1), "joints", 0.25, coarse=cfg.coarse)
     evidence: dict[str, dict[str, Any]] = {}
     if options.types and model.k:
-        evidence = hypotheses.select_types(run, share=0.25,
+        evidence = hypotheses.select_types(run, share=0.35,
                                            fixed=[j.source == "user" or is_locked(j)
                                                   for j in joints])
     removed: list[str] = []
     if options.parts and model.k:
-        removed = hypotheses.remove_spurious(run, locked=[is_locked(j) for j in joints])
-    run.done = max(run.done, 0.85)
-    run.run_fit(max(n // 4, 1), "final", 0.15)
+        removed = hypotheses.remove_spurious(run, locked=model.locked.tolist())
+    run.done = 0.6
+    model.hard = None                                       # soft skinning from the box parts
+    run.run_fit(max(n // 2, 1), "joints and skinning", 0.25)
+    model.harden()
+    run.run_fit(max(n // 4, 1), "hardened", 0.15)
     losses = evaluate(model, frames, cfg)
     result = export(model, frames, joints, losses, evidence, cfg)
     meta = {k: v for k, v in proposals.meta.items() if k != "optimised"}
@@ -206,6 +208,9 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             origin = centre
         states = model.joint_values(k)
         values = np.array(list(states.values()))
+        if values[np.argmax(np.abs(values))] < 0:   # opening is positive: flip the axis
+            axis, values = -axis, -values
+            states = {t: -v for t, v in states.items()}
         lo, hi = float(min(0.0, values.min())), float(max(0.0, values.max()))
         moving = [i for i, ti in enumerate(frames.time_index)
                   if abs(states[frames.times[ti]]) > 0.1 * max(hi - lo, 1e-9)]
