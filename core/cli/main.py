@@ -162,6 +162,24 @@ def build_parser() -> argparse.ArgumentParser:
                         "depth-initialised splat)")
     _device(p)
     _common(p)
+
+    p = sub.add_parser("bench-optimise", help="joint accuracy per category without and with "
+                       "the optimisation; basin rate from perturbed starts")
+    p.add_argument("--data", default=None, help="benchmark set from `artgs synth` (default: generate one)")
+    p.add_argument("--per-category", type=int, default=1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--category", nargs="+", choices=CATEGORIES, default=None,
+                   help="generated sets: only these categories")
+    p.add_argument("--width", type=int, default=160, help="generated sets: image width")
+    p.add_argument("--height", type=int, default=120, help="generated sets: image height")
+    p.add_argument("--iterations", type=int, default=0,
+                   help="optimise the static splat this many iterations (default 0: the "
+                        "depth-initialised splat)")
+    p.add_argument("--opt-iterations", type=int, default=300, help="steps of the main articulation fit")
+    p.add_argument("--basin", type=int, default=0,
+                   help="perturbed-start runs per capture (10-30 deg, 5-15 cm) for the basin rate")
+    _device(p)
+    _common(p)
     return parser
 
 
