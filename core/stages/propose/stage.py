@@ -66,7 +66,7 @@ def propose(capture: Capture, out: str | Path, progress: Progress, *, method: st
     arrays = read_ply(splat_path)
     t0 = time.perf_counter()
     if method == "motion":
-        from .motion import propose_motion
+        from .motion.route import propose_motion
         opacity = 1.0 / (1.0 + np.exp(-np.asarray(arrays.opacity_logits, float)))
         joints, meta = propose_motion(capture, arrays.means, opacity,
                                       lambda camera: _render_depth(arrays, camera, device),
