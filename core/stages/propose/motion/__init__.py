@@ -21,8 +21,8 @@ Steps (all in the world frame, metres):
    (core.geometry.rigid.fit_joint); the part is revolute if it turns and a slide explains it
    clearly worse. The joint is then refined on the measurements of all steps at once
    (core.geometry.rigid.refine_joint) using the splat's own part points. A slide within
-   ``snap_deg`` of the part front's normal is taken along that normal (a flat front measures only
-   that component).
+   ``front_snap_deg`` of the part front's normal is taken along that normal (a flat front measures
+   only that component).
 6. Joint values per step are ``states`` (positive = open), the observed range is ``limit``;
    extent (oriented box of the part in the closed state), handle, bbox and confidence follow.
 

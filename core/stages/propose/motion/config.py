@@ -32,4 +32,4 @@ class MotionConfig:
     grow_depth: float = 0.1           # ... from at most this far behind its closed front (m)
     refine_rounds: int = 10           # rounds of joint refinement on the measurements ...
     refine_point_weight: float = 0.2  # ... with this weight of point-to-point residuals
-    snap_deg: float = 25.0            # a slide this close to the front's normal is taken along it
+    front_snap_deg: float = 25.0      # a slide this close to the front's normal is taken along it

@@ -66,7 +66,7 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
         fit = refine_fit(fit, St, steps, views, moving, thr, cfg)
         snapped = None
         if fit.type == "prismatic":
-            fit, snapped = snap_to_front(fit, S, cfg.snap_deg)
+            fit, snapped = snap_to_front(fit, S, cfg.front_snap_deg)
         values = {t: 0.0 for t in times if t < start}
         values.update({t: float(v) for t, v in zip(moving, fit.values)})
         joint = make_joint(k, fit, values, moving, S, track, views, clouds)
