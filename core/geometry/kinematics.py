@@ -20,7 +20,7 @@ from ..model.joints import rotation_about_axis
 @dataclass(frozen=True)
 class ChainJoint:
     """One URDF joint: ``type`` fixed/revolute/continuous/prismatic; ``mimic`` = (joint, multiplier,
-    offset) or None."""
+    offset) or None; ``limit`` = (lower, upper), infinite where the URDF gives none."""
 
     name: str
     type: str
@@ -29,6 +29,7 @@ class ChainJoint:
     origin: np.ndarray
     axis: np.ndarray
     mimic: tuple[str, float, float] | None = None
+    limit: tuple[float, float] = (-math.inf, math.inf)
 
 
 @dataclass(frozen=True)

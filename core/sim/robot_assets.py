@@ -11,6 +11,7 @@ sampling meshes takes seconds.
 from __future__ import annotations
 
 import io
+import math
 import os
 from dataclasses import dataclass
 from functools import lru_cache
@@ -59,9 +60,13 @@ def load_chain(urdf: Path) -> Chain:
             axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), float)
             if not np.linalg.norm(axis) > 0:   # fixed joints may say "0 0 0"
                 axis = np.array([1.0, 0.0, 0.0])
+            limit = (-math.inf, math.inf)
+            if j.type in ("revolute", "prismatic") and j.limit is not None \
+                    and j.limit.lower is not None and j.limit.upper is not None:
+                limit = (float(j.limit.lower), float(j.limit.upper))
             ordered.append(ChainJoint(j.name, j.type, j.parent, j.child,
                                       np.eye(4) if j.origin is None else np.asarray(j.origin, float),
-                                      axis / np.linalg.norm(axis), mimic))
+                                      axis / np.linalg.norm(axis), mimic, limit))
             frontier.append(j.child)
     actuated = tuple(j.name for j in ordered if j.type != "fixed" and j.mimic is None)
     return Chain(roots[0], tuple(ordered), actuated)
