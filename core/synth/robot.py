@@ -27,7 +27,8 @@ from scipy.spatial.transform import Rotation
 
 from ..geometry.kinematics import joint_motion
 from ..model.joints import joint_transform
-from ..model.robots import RobotModel, robot_model
+from ..model.errors import InputError
+from ..model.robots import ROBOTS, RobotModel, robot_model
 from ..sim.robot_assets import load_chain, robot_urdf
 from .objects import ObjectSpec, box_distance
 
@@ -45,6 +46,21 @@ class RobotPlan:
     base_pose: np.ndarray
     positions: list[np.ndarray]
     error: float                     # worst grasp-point error over the times (m)
+
+
+def check_robot(name: str | None) -> None:
+    """Refuse an unknown robot name (before any work)."""
+    if name is not None and name not in ROBOTS:
+        raise InputError("command line", f"unknown robot {name!r}; expected one of "
+                         f"{', '.join(ROBOTS)}", field="robot")
+
+
+def robot_keys(plan: RobotPlan) -> dict:
+    """Top-level transforms.json keys of a capture with the robot (joint positions are per frame);
+    ``robot_grasp_error_mm``: the planned grasps' worst distance from the handle (information)."""
+    return {"robot": plan.model.name,
+            "robot_base_pose": [[float(v) for v in row] for row in plan.base_pose],
+            "robot_grasp_error_mm": round(1000 * plan.error, 2)}
 
 
 def grasps(spec: ObjectSpec, schedule: list[dict[str, float]]) -> list[np.ndarray]:
