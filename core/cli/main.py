@@ -11,12 +11,13 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
-import signal
 import sys
 from typing import Callable
 
-from ..model.errors import ArtgsError, Cancelled, InputError
+from ..model.errors import ArtgsError, InputError
+from ..model.interrupt import cancel_on_signals, ignore_further_interrupts, interrupted
 from ..model.progress import Progress
+from ..model.protocol import EXIT_BAD_INPUT, EXIT_CANCELLED, EXIT_FAILED
 from ..render.constants import LOW_PASS
 
 CATEGORIES = ("dishwasher", "refrigerator", "oven", "microwave", "storage", "drawer", "cabinet")
@@ -157,10 +158,6 @@ def _resolve(command: str) -> Callable[[argparse.Namespace, Progress], int | Non
     return getattr(importlib.import_module(f"{__package__.rpartition('.')[0]}.{module}"), func)
 
 
-def _terminate(signum, frame) -> None:  # noqa: ARG001
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``artgs`` command."""
     args = build_parser().parse_args(argv)
@@ -169,18 +166,26 @@ def main(argv: list[str] | None = None) -> int:
     # torch's OpenMP threads busy-wait between ops and starve the numba rasterizer's threads
     # (measured up to 10x slower on 2 cores); must be set before torch is imported.
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    signal.signal(signal.SIGTERM, _terminate)
+    with cancel_on_signals():
+        return _run(args, progress)
+
+
+def _run(args: argparse.Namespace, progress: Progress) -> int:
+    """Run the command; map errors to exit codes and one line of message."""
     try:
         code = _resolve(args.command)(args, progress)
-    except InputError as exc:
-        progress.error(str(exc))
-        return 2
-    except (KeyboardInterrupt, Cancelled):
-        progress.error("cancelled")
-        return 130
-    except ArtgsError as exc:
-        progress.error(str(exc))
-        return 1
+    except BaseException as exc:   # noqa: BLE001 - a cancel can surface as any exception type
+        ignore_further_interrupts()   # a second Ctrl-C must not turn this report into a traceback
+        if isinstance(exc, InputError):
+            progress.error(str(exc))
+            return EXIT_BAD_INPUT
+        if interrupted(exc):
+            progress.error("cancelled; the interrupted stage changed no file")
+            return EXIT_CANCELLED
+        if isinstance(exc, ArtgsError):
+            progress.error(str(exc))
+            return EXIT_FAILED
+        raise
     return int(code or 0)
 
 

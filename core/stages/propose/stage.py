@@ -17,13 +17,17 @@ import numpy as np
 
 from ...model import layout
 from ...model.capture import TRANSFORMS, Capture, load_capture
-from ...model.errors import InputError
+from ...model.errors import InputError, NothingFound
 from ...model.joints import Articulation, write_articulation
 from ...model.ply import read_ply
 from ...model.progress import Progress
 
 STAGE = "propose"
 METHODS = ("motion", "vlm")
+_NOTHING_FOUND_HINT = {
+    "motion": "Check that the interaction frames show a part moving between times.",
+    "vlm": "The VLM's answers held no usable joint; try another model or --method motion.",
+}
 
 
 def check_inputs(capture: Capture, out: str | Path, method: str, vlm: Any) -> Path:
@@ -78,7 +82,10 @@ def propose(capture: Capture, out: str | Path, progress: Progress, *, method: st
         joints, meta = propose_vlm(capture, Gaussians.from_arrays(arrays), progress,
                                    vlm or vlm_config(), device)
     if not joints:
-        progress.log(f"no joints found by the {method} route", level="warning")
+        kept = (f"{out / layout.PROPOSALS} is left as it was" if (out / layout.PROPOSALS).exists()
+                else f"no {layout.PROPOSALS} written")
+        raise NothingFound(f"the {method} route found no joints; {kept}. "
+                           + _NOTHING_FOUND_HINT[method])
     articulation = Articulation(joints, {"source": method, **meta})
     write_articulation(out / layout.PROPOSALS, articulation)
     layout.update_report(out, STAGE, seconds=round(time.perf_counter() - t0, 2),
