@@ -103,16 +103,6 @@ def generate_set(out: str | Path, categories: list[str] | tuple[str, ...] | None
     return paths
 
 
-def synth_command(args, progress: Progress) -> int:
-    """The ``artgs synth`` command."""
-    paths = generate_set(args.out, args.category, args.per_category, args.seed, progress,
-                         width=args.width, height=args.height, static_views=args.static_views,
-                         steps=args.steps, depth_noise=args.depth_noise,
-                         simultaneous=args.simultaneous)
-    progress.finished(captures=[str(p) for p in paths])
-    return 0
-
-
 def interaction_schedule(spec: ObjectSpec, steps: int, simultaneous: bool
                          ) -> list[dict[str, float]]:
     """Joint values per interaction time (index = time); see the module docstring."""
