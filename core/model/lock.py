@@ -19,17 +19,26 @@ from typing import IO, Iterator
 from .errors import InputError
 
 LOCK = ".artgs.lock"
+_held: dict[Path, int] = {}   # locks this process holds -> nesting depth (``run`` holds, stages nest)
 
 
 @contextmanager
 def out_lock(out: str | Path, command: str = "") -> Iterator[Path]:
-    """Hold the lock on ``out`` (created if needed) for the ``with`` body.
+    """Hold the lock on the folder ``out`` for the ``with`` body (re-entrant in one process).
 
     Raises :class:`InputError` naming the lock file and the holder's pid when another live
     process holds it.
     """
-    path = Path(out) / LOCK
+    path = (Path(out) / LOCK).resolve()
+    if path in _held:
+        _held[path] += 1
+        try:
+            yield path
+        finally:
+            _held[path] -= 1
+        return
     f = _acquire(path)
+    _held[path] = 1
     try:
         f.seek(0)
         f.truncate()
@@ -38,6 +47,7 @@ def out_lock(out: str | Path, command: str = "") -> Iterator[Path]:
         f.flush()
         yield path
     finally:
+        del _held[path]
         if sys.platform != "win32":   # Windows cannot remove an open file; the next run reuses it
             path.unlink(missing_ok=True)
         f.close()
