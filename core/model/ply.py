@@ -81,7 +81,7 @@ def write_ply(path: str | Path, splats: SplatArrays) -> None:
     names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
     names += [f"f_rest_{i}" for i in range(3 * (k - 1))]
     names += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
-    rest = np.transpose(splats.sh[:, 1:, :], (0, 2, 1)).reshape(n, -1)  # channel-major
+    rest = np.transpose(splats.sh[:, 1:, :], (0, 2, 1)).reshape(n, 3 * (k - 1))  # channel-major
     columns = np.concatenate([
         splats.means.reshape(n, 3), np.zeros((n, 3), np.float32), splats.sh[:, 0, :], rest,
         splats.opacity_logits.reshape(n, 1), splats.log_scales.reshape(n, 3),
