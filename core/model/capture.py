@@ -132,8 +132,14 @@ class _FrameSpec:
     robot_joint_positions: list[float] | None
 
 
-def load_capture(path: str | Path) -> Capture:
-    """Read and validate the capture folder ``path`` (or its transforms.json); see the module doc."""
+def load_capture(path: str | Path, max_side: int | None = None) -> Capture:
+    """Read and validate the capture folder ``path`` (or its transforms.json); see the module doc.
+
+    ``max_side``: the working resolution; frames whose longer side is larger are shrunk to it
+    on load (intrinsics scaled with them), so big frames cost no more memory than small ones.
+    """
+    if max_side is not None and (not isinstance(max_side, int) or max_side < 8):
+        raise InputError("--max-side", f"must be a whole number of pixels >= 8, not {max_side!r}")
     path = Path(path)
     root = path.parent if path.name == TRANSFORMS and path.is_file() else path
     if not root.is_dir():
@@ -171,12 +177,15 @@ def load_capture(path: str | Path) -> Capture:
     # cv2 decodes without the GIL; map() yields in order, so the first bad frame is reported.
     pool = ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1))
     try:
-        frames = list(pool.map(lambda s: _load_frame(s, float(scale), maps), specs))
+        frames = list(pool.map(lambda s: _load_frame(s, float(scale), maps, max_side), specs))
     finally:
         pool.shutdown(cancel_futures=True)
     meta = {"transforms": {k: v for k, v in top.items() if k != "frames"},
             "depth_unit_scale_factor": float(scale),
-            "undistorted": [s.index for s in specs if s.distortion is not None]}
+            "undistorted": [s.index for s in specs if s.distortion is not None],
+            "max_side": max_side,
+            "resized": {s.index: [s.width, s.height] for s, f in zip(specs, frames)
+                        if f.camera.width != s.width}}
     return Capture(root=root, frames=frames, robot=robot, meta=meta, robot_base_pose=base)
 
 
@@ -461,7 +470,32 @@ def _undistort_maps(s: _FrameSpec, cache: dict) -> tuple[np.ndarray, np.ndarray]
     return cache[key]
 
 
-def _load_frame(s: _FrameSpec, scale: float, maps: dict) -> Frame:
+def working_size(K: np.ndarray, width: int, height: int, max_side: int
+                 ) -> tuple[np.ndarray, int, int]:
+    """Intrinsics and size of a ``width`` x ``height`` camera shrunk so its longer side is
+    ``max_side``; pixel centres at (j + 0.5, i + 0.5) scale with the image, and so do cx, cy."""
+    factor = max_side / max(width, height)
+    w, h = max(1, round(width * factor)), max(1, round(height * factor))
+    K = K.copy()
+    K[0] *= w / width
+    K[1] *= h / height
+    return K, w, h
+
+
+def resolution_note(capture: Capture) -> str | None:
+    """A line for the log when frames were shrunk to the working resolution, else None."""
+    resized = capture.meta.get("resized") or {}
+    if not resized:
+        return None
+    index = next(iter(resized))
+    frame = next(f for f in capture.frames if f.index == index)
+    w, h = resized[index]
+    return (f"working resolution {frame.camera.width}x{frame.camera.height} "
+            f"(--max-side {capture.meta['max_side']}; {len(resized)} frame(s) captured at up to "
+            f"{w}x{h}, intrinsics scaled)")
+
+
+def _load_frame(s: _FrameSpec, scale: float, maps: dict, max_side: int | None = None) -> Frame:
     rgb = _read_rgb(s)
     depth = _read_depth(s, scale) if s.depth_path is not None else None
     mask = _read_mask(s) if s.mask_path is not None else None
@@ -480,8 +514,20 @@ def _load_frame(s: _FrameSpec, scale: float, maps: dict) -> Frame:
                              borderMode=cv2.BORDER_CONSTANT).astype(bool) & seen
         elif not seen.all():
             mask = seen
+    K, width, height = s.K, s.width, s.height
+    if max_side is not None and max(width, height) > max_side:
+        K, width, height = working_size(K, width, height, max_side)
+        cv2 = _cv2()
+        size = (width, height)
+        rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
+        # nearest (pixel-centre exact): depths and mask labels are never blended across edges
+        if depth is not None:
+            depth = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST_EXACT)
+        if mask is not None:
+            mask = cv2.resize(mask.view(np.uint8), size,
+                              interpolation=cv2.INTER_NEAREST_EXACT).astype(bool)
     return Frame(index=s.index, file_path=s.file_path,
-                 camera=Camera(s.K, s.c2w, s.width, s.height), rgb=rgb, depth=depth, mask=mask,
+                 camera=Camera(K, s.c2w, width, height), rgb=rgb, depth=depth, mask=mask,
                  phase=s.phase, time=s.time, robot_joint_positions=s.robot_joint_positions)
 
 
