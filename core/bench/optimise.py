@@ -28,6 +28,8 @@ from ..model.errors import InputError
 from ..model.joints import Articulation, read_articulation, rotation_about_axis, write_articulation
 from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
+from ..model.registry import OptimiseOptions, ProposeOptions
+from .options import BenchOptimiseOptions
 from .propose import summarize
 
 
@@ -65,7 +67,7 @@ def bench_capture(capture_dir: Path, work: Path, options, iterations: int = 0, b
         reconstruct(capture, out, QUIET, iterations=iterations, device=options.device)
     else:
         write_ply(out / layout.SPLAT, initial_splats(capture.static)[0])
-    proposals = propose(capture, out, QUIET, method="motion", device=options.device)
+    proposals = propose(capture, out, QUIET, ProposeOptions(method="motion", device=options.device))
     t0 = time.perf_counter()
     optimise(out, capture, QUIET, options)
     seconds = time.perf_counter() - t0
@@ -107,10 +109,9 @@ def basin_rate(results: list[dict], ae: float = 1.0, oe: float = 1.0) -> tuple[f
     return (sum(ok) / len(ok) if ok else math.nan), len(ok)
 
 
-def bench_optimise_command(args, progress: Progress) -> int:
+def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
     """``artgs bench-optimise [--data DIR] [--per-category N] [--seed S] [--category C ...]
     [--width W --height H] [--iterations N] [--opt-iterations N] [--basin N]``."""
-    from ..stages.optimise import OptimiseOptions
     options = OptimiseOptions(iterations=args.opt_iterations, device=args.device)
     with tempfile.TemporaryDirectory(prefix="artgs-bench-optimise-") as tmp:
         tmp = Path(tmp)

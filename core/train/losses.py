@@ -1,37 +1,64 @@
-"""Image losses shared by the stages that fit a splat to RGB-D frames.
+"""Image losses of a render against a captured view: L1, SSIM, depth L1, alpha L1.
 
-``image_loss``: ``(1 - λ_ssim) L1 + λ_ssim (1 - SSIM)`` of the render (black background) against
-the masked image, L1 summed over the image and divided by the object pixels; plus a depth term
-over pixels measured inside the mask, in units of ``depth_unit`` (plain L1, or Huber with
-threshold 1 unit, whose gradient is bounded so pixels no model explains cannot dominate); plus
-``λ_alpha`` times the mean |alpha − mask|.
+All are means over object pixels, so their weights do not depend on the image size or on how much
+of the image the object covers.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
-import torch.nn.functional as F
 
+from ..render.rasterize import RenderOutput
 from .ssim import ssim
+from .views import View
 
 
-def image_loss(r, v, *, lambda_ssim: float = 0.2, lambda_depth: float = 0.1,
-               depth_unit: float = 0.01, lambda_alpha: float = 0.5,
-               robust: bool = False) -> torch.Tensor:
-    """Loss of render ``r`` (rgb, depth, alpha) against view ``v`` (rgb, mask, depth,
-    depth_valid, pixels), as in the module doc."""
-    l1 = (r.rgb - v.rgb).abs().sum() / (3 * v.pixels)
-    loss = (1 - lambda_ssim) * l1 + lambda_ssim * (1 - ssim(r.rgb, v.rgb))
-    if lambda_depth and bool(v.depth_valid.any()):
-        err = (r.depth - v.depth)[v.depth_valid] / depth_unit
-        d = F.huber_loss(err, torch.zeros_like(err), delta=1.0) if robust else err.abs().mean()
-        loss = loss + lambda_depth * d
-    if lambda_alpha:
-        loss = loss + lambda_alpha * (r.alpha - v.mask).abs().mean()
+@dataclass
+class LossWeights:
+    """``(1 - ssim) L1 + ssim (1 - SSIM) + depth / unit * depth L1 + alpha * alpha L1``."""
+
+    ssim: float = 0.2
+    depth: float = 0.1     # per depth unit (the caller's, e.g. 1% of the object size)
+    alpha: float = 0.5
+
+
+def l1(rgb: torch.Tensor, target: torch.Tensor, pixels: int) -> torch.Tensor:
+    """Absolute colour error summed over the image, per channel and object pixel (``target`` is
+    zero outside the object, so a render that is black there adds nothing)."""
+    return (rgb - target).abs().sum() / (3 * pixels)
+
+
+def photometric(rgb: torch.Tensor, target: torch.Tensor, pixels: int,
+                lambda_ssim: float) -> torch.Tensor:
+    """``(1 - lambda_ssim) L1 + lambda_ssim (1 - SSIM)`` as in 3DGS."""
+    return (1 - lambda_ssim) * l1(rgb, target, pixels) + lambda_ssim * (1 - ssim(rgb, target))
+
+
+def depth_l1(depth: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """Mean absolute depth error (m) over the ``valid`` pixels (measured and inside the object)."""
+    return (depth - target)[valid].abs().mean()
+
+
+def alpha_l1(alpha: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean absolute error of the accumulated alpha against the object mask (keeps the background
+    empty)."""
+    return (alpha - mask).abs().mean()
+
+
+def view_loss(r: RenderOutput, v: View, w: LossWeights, depth_unit: float) -> torch.Tensor:
+    """The weighted sum of the losses of render ``r`` against view ``v``; depth errors are
+    measured in ``depth_unit`` metres."""
+    loss = photometric(r.rgb, v.rgb, v.pixels, w.ssim)
+    if w.depth and v.depth_valid.any():
+        loss = loss + w.depth / depth_unit * depth_l1(r.depth, v.depth, v.depth_valid)
+    if w.alpha:
+        loss = loss + w.alpha * alpha_l1(r.alpha, v.mask)
     return loss
 
 
-def robust_image_loss(r, v, *, depth_unit: float, sigma_rgb: float = 0.1,
+def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb: float = 0.1,
                       sigma_depth: float = 2.0, sigma_alpha: float = 0.5,
                       lambda_ssim: float = 0.2) -> torch.Tensor:
     """A loss that pixels no model explains cannot drag (an unseen interior revealed by an open

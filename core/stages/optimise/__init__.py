@@ -1,5 +1,6 @@
 """The articulation optimisation stage (``artgs optimise``): see :mod:`.stage`."""
 
-from .stage import OptimiseOptions, optimise, run
+from ...model.registry import OptimiseOptions
+from .stage import optimise, run
 
 __all__ = ["OptimiseOptions", "optimise", "run"]

@@ -13,8 +13,7 @@ import torch
 import torch.nn.functional as F
 
 from ...model.capture import Capture
-from ...model.errors import InputError
-from ..reconstruct import View, make_view
+from ...train.views import View, make_view
 
 
 @dataclass
@@ -51,15 +50,9 @@ def downsample(v: View) -> View:
 
 
 def interaction_frames(capture: Capture, device: torch.device, min_size: int = 24) -> FrameSet:
-    """All interaction frames with a time; pyramid levels while the image stays >= ``min_size``."""
+    """All interaction frames with a time (checked by ``stage.check``: there are some, all with
+    depth); pyramid levels while the image stays >= ``min_size``."""
     frames = [f for f in capture.interaction if f.time is not None]
-    if not frames:
-        raise InputError(capture.root / "transforms.json", "optimisation needs interaction frames "
-                         "(\"phase\": \"interaction\" with an integer \"time\")", field="frames")
-    missing = [f for f in frames if f.depth is None]
-    if missing:
-        raise InputError(capture.root / "transforms.json", "optimisation needs depth on every "
-                         "interaction frame", frame=missing[0].index, field="depth_file_path")
     times = sorted({int(f.time) for f in frames})
     cams: list[bytes] = []
     cam_idx = []

@@ -20,7 +20,6 @@ from __future__ import annotations
 import io
 import math
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -28,12 +27,13 @@ import numpy as np
 import torch
 
 from ...geometry.parts import assign_parts
-from ...model import atomic, layout
-from ...model.capture import Capture
+from ...model import atomic, layout, registry
+from ...model.capture import TRANSFORMS, Capture
 from ...model.errors import InputError
 from ...model.joints import Articulation, Joint, read_articulation, write_articulation
 from ...model.ply import read_ply
 from ...model.progress import Progress
+from ...model.registry import OptimiseOptions
 from ...render.device import resolve_device
 from .fit import FitConfig, evaluate, fit, search_states
 from .frames import FrameSet, interaction_frames
@@ -42,21 +42,6 @@ from .kinematics import REVOLUTE
 
 STAGE = "optimise"
 USER_TRUST = 1.0     # prior strength of ``source: user`` joints (others 0)
-
-
-@dataclass
-class OptimiseOptions:
-    """User-facing options of ``artgs optimise``."""
-
-    iterations: int = field(default=300, metadata={
-        "help": "steps of the main fit (the later phases take fractions of it)"})
-    types: bool = field(default=True, metadata={
-        "help": "choose each joint's type by fitting both hypotheses (off: keep the proposal's)"})
-    parts: bool = field(default=True, metadata={
-        "help": "remove parts the frames do not show moving and add missed ones"})
-    device: str = field(default="auto", metadata={
-        "help": "where torch work runs", "choices": ("auto", "cpu", "cuda")})
-    seed: int = field(default=0, metadata={"help": "random seed of the frame sampling"})
 
 
 def object_size(means: np.ndarray) -> float:
@@ -70,13 +55,18 @@ def is_locked(j: Joint) -> bool:
     return bool(j.extra.get("locked", False))
 
 
-def check_inputs(out: Path, capture: Capture | None) -> tuple[Path, Path]:
-    """Refuse unusable input before any work; returns (splat, proposals) paths."""
-    splat = layout.require(out, layout.SPLAT, "reconstruct")
-    proposals = layout.require(out, layout.PROPOSALS, "propose")
-    if capture is None:
-        raise InputError(out / layout.REPORT, "optimisation needs the capture", field="capture")
-    return splat, proposals
+def check(capture: Capture, options: OptimiseOptions) -> None:
+    """Refuse a capture or options the optimisation cannot serve, before any work."""
+    if options.iterations < 1:
+        raise InputError("--iterations", f"must be positive, not {options.iterations}")
+    frames = [f for f in capture.interaction if f.time is not None]
+    if not frames:
+        raise InputError(Path(capture.root) / TRANSFORMS, "optimisation needs interaction frames "
+                         "(\"phase\": \"interaction\" with an integer \"time\")", field="frames")
+    missing = [f for f in frames if f.depth is None]
+    if missing:
+        raise InputError(Path(capture.root) / TRANSFORMS, "optimisation needs depth on every "
+                         "interaction frame", frame=missing[0].index, field="depth_file_path")
 
 
 class Runner:
@@ -126,11 +116,9 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     options = options or OptimiseOptions()
     cfg = config or FitConfig()
     out = Path(out)
-    if options.iterations < 1:
-        raise InputError("--iterations", f"must be positive, not {options.iterations}")
-    splat_path, proposals_path = check_inputs(out, capture)
-    arrays = read_ply(splat_path)
-    proposals = read_articulation(proposals_path)
+    check(capture, options)
+    arrays = read_ply(registry.require(out, layout.SPLAT))
+    proposals = read_articulation(registry.require(out, layout.PROPOSALS))
     t0 = time.perf_counter()
     dev = resolve_device(options.device)
     torch.manual_seed(options.seed)
@@ -255,35 +243,8 @@ def part_box(points: np.ndarray) -> dict[str, Any]:
 
 def run(out: Path, capture: Capture | None, options: OptimiseOptions,
         progress: Progress) -> dict[str, Any]:
-    """The stage function of the registry: optimise and return the figures."""
-    check_inputs(Path(out), capture)
+    """The optimise stage (registry entry): OUT/articulation.json, OUT/part_labels.npy."""
+    if capture is None:
+        raise InputError(Path(out) / layout.REPORT, "optimisation needs the capture",
+                         field="capture")
     return optimise(out, capture, progress, options)
-
-
-def optimise_stage(out: str | Path, capture: Capture, progress: Progress,
-                   options: OptimiseOptions | None = None) -> dict[str, Any]:
-    """:func:`optimise` as a pipeline stage: progress start/finish and its report.json entry."""
-    progress.start(STAGE, "fitting joints to the interaction frames")
-    figures = optimise(out, capture, progress, options)
-    seconds = progress.finish(STAGE, joints=figures["joints"], loss=figures["loss"])
-    layout.update_report(out, STAGE, **{**figures, "seconds": round(seconds, 2)})
-    return figures
-
-
-def optimise_command(args, progress: Progress) -> int:
-    """``artgs optimise OUT [--capture C] [--iterations N] [--no-types] [--no-parts]``."""
-    from ...model.capture import load_capture
-    out = Path(args.out)
-    layout.require(out, layout.SPLAT, "reconstruct")
-    layout.require(out, layout.PROPOSALS, "propose")
-    capture = load_capture(layout.capture_of(out, args.capture))
-    options = OptimiseOptions(iterations=args.iterations, types=not args.no_types,
-                              parts=not args.no_parts, device=args.device, seed=args.seed)
-    optimise_stage(out, capture, progress, options)
-    for j in read_articulation(out / layout.ARTICULATION).joints:
-        progress.log(f"{j.name}: {j.type} axis {np.round(j.axis, 4).tolist()} origin "
-                     f"{np.round(j.origin, 4).tolist()} limit [{j.limit[0]:.3f}, "
-                     f"{j.limit[1]:.3f}] confidence {j.confidence}")
-    progress.finished(articulation=str(out / layout.ARTICULATION),
-                      part_labels=str(out / layout.PART_LABELS))
-    return 0
