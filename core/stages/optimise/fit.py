@@ -64,19 +64,23 @@ def evaluate(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, level: i
 def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         rng: np.random.Generator, *, free: list[bool] | None = None,
         times: list[int] | None = None, prior: torch.Tensor | None = None,
-        tick: Callable[[int, float], None] | None = None, coarse: float = 0.0) -> float:
+        tick: Callable[[int, float], None] | None = None, coarse: float = 0.0,
+        lr_scale: float = 1.0) -> float:
     """Run ``steps`` Adam steps; returns the mean loss of the last quarter of them.
 
     ``free``: joints that move (default all); ``times``: time indices to sample (default all);
     ``prior``: per-joint strength of the pull towards the start; ``tick(step, loss)`` is called
-    every step (progress and cancel); ``coarse``: fraction of the steps at the coarsest level.
+    every step (progress and cancel); ``coarse``: fraction of the steps at the coarsest level;
+    ``lr_scale``: multiplies the learning rates (refining phases start below the first fit's
+    rates: Adam's steps are about the learning rate whatever the gradient, so a converged
+    solution restarted at full rate would wander off).
     """
     if steps <= 0 or model.k == 0:
         return float("nan")
     dev = model.axes.device
     size = model.size
-    lrs = {"axes": cfg.lr_axes, "origins": cfg.lr_origins * size, "states": cfg.lr_states,
-           "logits": cfg.lr_logits}
+    lrs = {"axes": cfg.lr_axes * lr_scale, "origins": cfg.lr_origins * size * lr_scale,
+           "states": cfg.lr_states * lr_scale, "logits": cfg.lr_logits}
     params = model.params()
     opt = Adam(params, {k: lrs[k] for k in params}, eps=1e-12)
     model.load(opt.params)

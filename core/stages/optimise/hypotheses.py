@@ -272,3 +272,38 @@ def remove_spurious(run, locked: list[bool]) -> list[str]:
         else:
             k += 1
     return removed
+
+
+def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
+                      start_types: list[str], names: list[str]) -> list[str]:
+    """Per joint whose type did not change: if the start's axis and point, with the fitted states
+    and parts, explain the frames where the joint moves better than the fitted ones, take them
+    back (a precise proposal is not traded for a fit that wandered along a flat valley).
+    Returns the names of the joints that kept their start."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    kept = []
+    for k in range(model.k):
+        s = names.index(model.names[k]) if model.names[k] in names else None
+        if s is None or model.types[k] != start_types[s] or bool(model.locked[k]):
+            continue
+        ids = moving_frames(model, frames, k)
+        if not ids:
+            continue
+        fitted = _snapshot(model)
+        here = float(evaluate(model, frames, cfg, 0, ids).mean())
+        with torch.no_grad():
+            model.axes = model.axes.clone()
+            model.origins = model.origins.clone()
+            a = torch.as_tensor(start_axes[s], dtype=torch.float32, device=model.axes.device)
+            if float((a * model.joint_axes()[k]).sum()) < 0:   # the fitted states' sign
+                a = -a
+            model.axes[k] = a
+            model.origins[k] = torch.as_tensor(start_origins[s], dtype=torch.float32)
+        there = float(evaluate(model, frames, cfg, 0, ids).mean())
+        if there < here:
+            kept.append(model.names[k])
+            run.progress.log(f"{model.names[k]}: the start explains the frames better "
+                             f"({there:.5f} < {here:.5f}); kept")
+        else:
+            _restore(model, fitted)
+    return kept

@@ -12,6 +12,7 @@ Steps (each fit is :func:`.fit.fit`):
 2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
 3. type by evidence, then spurious parts (:mod:`.hypotheses`);
 4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
+   a joint whose start explains its frames better than the fit keeps the start's axis and point;
 5. report per joint residual, observed range and confidence.
 """
 
@@ -138,10 +139,12 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                  f"size {size:.3f} m")
 
     model.hard = torch.as_tensor(labels, device=dev)       # the boxes' parts, until step 4
+    start = (model.axes.cpu().numpy().copy(), model.origins.cpu().numpy().copy(),
+             list(model.types), list(model.names))
     for k, j in enumerate(joints):
         if not j.states:
             search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
-    run.run_fit(max(n // 2, 1), "joints", 0.25, coarse=cfg.coarse)
+    run.run_fit(n, "joints", 0.25, coarse=cfg.coarse)
     evidence: dict[str, dict[str, Any]] = {}
     if options.types and model.k:
         evidence = hypotheses.select_types(run, share=0.35,
@@ -152,15 +155,17 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
         removed = hypotheses.remove_spurious(run, locked=model.locked.tolist())
     run.done = 0.6
     model.hard = None                                       # soft skinning from the box parts
-    run.run_fit(max(n // 2, 1), "joints and skinning", 0.25)
+    run.run_fit(max(n // 2, 1), "joints and skinning", 0.25, lr_scale=0.3)
     model.harden()
-    run.run_fit(max(n // 4, 1), "hardened", 0.15)
+    run.run_fit(max(n // 4, 1), "hardened", 0.15, lr_scale=0.1)
+    kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     losses = evaluate(model, frames, cfg)
     result = export(model, frames, joints, losses, evidence, cfg)
     meta = {k: v for k, v in proposals.meta.items() if k != "optimised"}
     articulation = Articulation(result, {**meta, "optimised": True,
                                          "loss": float(losses.mean()), "removed": removed})
     figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
+               "kept_start": kept_start,
                "types": [j.type for j in result],
                "seconds": round(time.perf_counter() - t0, 2)}
     write_labels(out / layout.PART_LABELS, model.labels())
