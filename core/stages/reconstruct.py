@@ -35,6 +35,7 @@ import torch
 from ..model import layout
 from ..model.capture import Capture, Frame
 from ..model.errors import InputError
+from ..model.memory import available_bytes, gigabytes
 from ..model.ply import SplatArrays, write_ply
 from ..model.progress import Progress
 from ..model.registry import ReconstructOptions
@@ -50,6 +51,8 @@ from ..train.params import params_splat, render_params, splat_params
 from ..train.views import View, make_view
 
 STAGE = "reconstruct"
+_BYTES_PER_GAUSSIAN = 2500   # measured, see memory_estimate
+_BYTES_PER_PIXEL = 30
 
 
 @dataclass
@@ -112,6 +115,60 @@ def normal_quats(normals: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
+def voxelize(points: np.ndarray, footprints: np.ndarray, voxel_pixels: float
+             ) -> tuple[float, np.ndarray, np.ndarray]:
+    """Voxel size (``voxel_pixels`` median footprints), each point's voxel number and the points
+    per voxel (one initial Gaussian per voxel)."""
+    voxel = float(voxel_pixels * np.median(footprints))
+    cell = np.floor((points - points.min(0)) / voxel).astype(np.int64)
+    dims = cell.max(0) + 1
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    _, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+    return voxel, inv, counts
+
+
+def initial_count(frames: list[Frame], voxel_pixels: float = 1.0) -> int:
+    """How many Gaussians :func:`initial_splats` would start from (points only: cheap)."""
+    pts, foot = [], []
+    for f in frames:
+        if f.depth is None:
+            continue
+        world, idx = f.camera.backproject(f.depth, f.mask)
+        pts.append(world)
+        foot.append(f.depth.reshape(-1)[idx] / math.sqrt(f.camera.K[0, 0] * f.camera.K[1, 1]))
+    if not pts or sum(len(p) for p in pts) == 0:
+        return 0
+    return len(voxelize(np.concatenate(pts), np.concatenate(foot), voxel_pixels)[2])
+
+
+def memory_estimate(frames: list[Frame], gaussians: int) -> int:
+    """Peak bytes the optimisation adds for ``gaussians`` Gaussians over ``frames``'s views.
+
+    Measured (``artgs reconstruct`` on synthetic captures at 160x120, 320x240 and 640x480, 24
+    views, peak RSS less the RSS after loading): about 2.5 KB per Gaussian (parameters, gradients,
+    Adam moments, rasterizer buffers, autograd intermediates) and 30 bytes per view pixel (the
+    views as tensors: RGB, mask, depth, validity), with a 1.5x margin.
+    """
+    pixels = sum(f.camera.width * f.camera.height for f in frames)
+    return int(1.5 * (_BYTES_PER_GAUSSIAN * gaussians + _BYTES_PER_PIXEL * pixels))
+
+
+def check_memory(frames: list[Frame], cfg: ReconstructConfig, max_side: int) -> None:
+    """Refuse a reconstruction that would not fit in the memory this process can still use."""
+    available = available_bytes()
+    if available is None:
+        return
+    n = max(initial_count(frames, cfg.voxel_pixels), cfg.densify.max_gaussians)
+    need = memory_estimate(frames, n)
+    if need > available:
+        w = max(f.camera.width for f in frames)
+        h = max(f.camera.height for f in frames)
+        raise InputError("--max-side", f"reconstructing {len(frames)} views of {w}x{h} pixels "
+                         f"from about {n:,} Gaussians needs about {gigabytes(need)} of memory, but "
+                         f"only {gigabytes(available)} is available; lower --max-side (now "
+                         f"{max_side or 'off'}) or free memory")
+
+
 def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: float = 1.0,
                    scale: float = 0.6, flat: float = 0.1, opacity: float = 0.95
                    ) -> tuple[SplatArrays, float]:
@@ -137,11 +194,7 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
         raise InputError("capture", "no masked depth pixels in the static views to start from",
                          field="depth_file_path")
     P, C, S = np.concatenate(pts), np.concatenate(cols), np.concatenate(foot)
-    voxel = float(voxel_pixels * np.median(S))
-    cell = np.floor((P - P.min(0)) / voxel).astype(np.int64)
-    dims = cell.max(0) + 1
-    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
-    _, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+    voxel, inv, counts = voxelize(P, S, voxel_pixels)
 
     def total(a: np.ndarray) -> np.ndarray:
         return np.stack([np.bincount(inv, weights=a[:, i]) for i in range(a.shape[1])], -1)
@@ -272,7 +325,8 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
 
 
 def check(capture: Capture, options: ReconstructOptions) -> None:
-    """Refuse options the capture cannot serve, before any work."""
+    """Refuse options the capture cannot serve, or a reconstruction that would not fit in
+    memory, before any work."""
     static = capture.static
     if not static:
         raise InputError(capture.root, "no static frames to reconstruct from", field="phase")
@@ -283,6 +337,9 @@ def check(capture: Capture, options: ReconstructOptions) -> None:
     if options.iterations is not None and options.iterations < 1:
         raise InputError(capture.root, f"--iterations must be positive, not {options.iterations}",
                          field="iterations")
+    held = holdout_indices(len(static), options.holdout)
+    check_memory([f for i, f in enumerate(static) if i not in held], ReconstructConfig(),
+                 options.max_side)
 
 
 def run(out: Path, capture: Capture, options: ReconstructOptions,
