@@ -11,9 +11,9 @@ a module name and checked against these rules (README, "Repository layout"):
    ``cli``, ``bench``, ``synth`` (and ``artgs.__main__`` imports cli). The ``artgs.core`` package
    itself imports nothing. Every module of core/ belongs to one of these parts.
 2. ``core.model`` is numpy-only: at module level it imports only the standard library, numpy and
-   model modules; inside functions only the few imports listed in :data:`MODEL_LAZY` (cv2 in the
-   capture reader, torch in the environment probe), so importing any model module in Blender loads
-   neither torch nor cv2. The geometry modules in :data:`BLENDER_GEOMETRY` follow the same rule
+   model modules; inside functions only the few imports listed in :data:`MODEL_LAZY` (cv2 where
+   the capture reader decodes images, model/frame_files.py; torch in the environment probe), so
+   importing any model module in Blender loads neither torch nor cv2. The geometry modules in :data:`BLENDER_GEOMETRY` follow the same rule
    (no lazy exceptions). ``core.geometry`` imports only numpy and scipy from outside.
 3. The Blender side (``artgs/__init__.py``, ``artgs_addon``, ``operators``, ``panels``) imports,
    at any level, only the standard library, Blender's modules, numpy, ``core.model``, the
@@ -61,7 +61,7 @@ BLENDER_APIS = {"bpy", "bpy_extras", "mathutils", "gpu", "gpu_extras", "bmesh", 
 BLENDER_GEOMETRY = {"artgs.core.geometry.parts", "artgs.core.geometry.lift",
                     "artgs.core.geometry.metrics"}
 #: the only lazy (inside a function) outside imports of core.model, per module
-MODEL_LAZY = {"artgs.core.model.capture": {"cv2"}, "artgs.core.model.envcheck": {"torch"}}
+MODEL_LAZY = {"artgs.core.model.frame_files": {"cv2"}, "artgs.core.model.envcheck": {"torch"}}
 GEOMETRY_THIRD_PARTY = {"numpy", "scipy"}
 STDLIB = set(sys.stdlib_module_names)
 
