@@ -222,6 +222,10 @@ def _read_vertex(path: Path, fmt: str, elements: list, header_len: int) -> np.nd
     count, props = next((c, p) for n, c, p in elements if n == "vertex")
     if endian is None:
         dtype = np.dtype([(p, kind) for p, kind in props])
+        size = path.stat().st_size - header_len
+        if count * len(props) * 2 > size:   # each value takes at least a digit and a separator
+            raise InputError(path, f"file is truncated: {size} bytes of ASCII data cannot hold "
+                             f"the {count} vertices the header promises", field="vertex")
         with open(path, "rb") as f:
             f.seek(header_len)
             try:
