@@ -30,6 +30,9 @@ Decisions where the format leaves room (also the documentation of what is accept
   is checked here so every command refuses such a capture before any work.
 - Poses: ``transform_matrix`` must be a finite 4x4 rigid transform: bottom row ``[0, 0, 0, 1]``,
   rotation part orthonormal within 1e-3 with determinant +1 (scaled or mirrored poses are refused).
+- ``robot_joint_positions``: finite numbers; when ``robot`` is one of core/model/robots.py, as many
+  as its actuated joints (or its arm joints alone). ``robot_base_pose`` (optional, top level, world
+  <- robot base) is checked like a camera pose.
 - Unknown keys are ignored.
 """
 
@@ -47,6 +50,7 @@ import numpy as np
 from .cameras import Camera, intrinsics
 from .errors import InputError
 from .jsonio import read_json_object
+from .robots import robot_model
 
 PHASES = ("static", "interaction")
 CAMERA_MODELS = ("PINHOLE", "OPENCV")
@@ -92,6 +96,7 @@ class Capture:
     frames: list[Frame]
     robot: str | None = None
     meta: dict = field(default_factory=dict)
+    robot_base_pose: np.ndarray | None = None   # 4x4 world <- robot base (None: not given)
 
     @property
     def static(self) -> list[Frame]:
@@ -152,7 +157,10 @@ def load_capture(path: str | Path, max_side: int | None = None) -> Capture:
     if robot is not None and not isinstance(robot, str):
         raise InputError(tj, f"must be a robot model name (a string), not {robot!r}", field="robot")
 
+    base = top.get("robot_base_pose")
+    base = None if base is None else _pose(base, tj, None, "robot_base_pose")
     specs = [_parse_frame(i, raw, top, tj, root) for i, raw in enumerate(frames_raw)]
+    _check_robot_joints(specs, robot, tj)
     if not any(s.phase == "static" and s.depth_path is not None for s in specs):
         raise InputError(tj, "no static frame with depth: reconstruction needs static RGB-D views "
                          "(phase 'static' and a depth_file_path)", field="frames")
@@ -178,7 +186,7 @@ def load_capture(path: str | Path, max_side: int | None = None) -> Capture:
             "max_side": max_side,
             "resized": {s.index: [s.width, s.height] for s, f in zip(specs, frames)
                         if f.camera.width != s.width}}
-    return Capture(root=root, frames=frames, robot=robot, meta=meta)
+    return Capture(root=root, frames=frames, robot=robot, meta=meta, robot_base_pose=base)
 
 
 # --- transforms.json ---------------------------------------------------------------------------
@@ -270,8 +278,7 @@ def _distortion(lookup, tj: Path, label: str) -> np.ndarray | None:
     return dist
 
 
-def _pose(value: Any, tj: Path, label: str) -> np.ndarray:
-    f = "transform_matrix"
+def _pose(value: Any, tj: Path, label: str | None, f: str = "transform_matrix") -> np.ndarray:
     if value is None:
         raise InputError(tj, "missing the 4x4 camera-to-world matrix", frame=label, field=f)
     if not (isinstance(value, list) and len(value) == 4
@@ -333,6 +340,18 @@ def _joint_positions(raw: dict, tj: Path, label: str) -> list[float] | None:
         raise InputError(tj, "must be a list of finite numbers (radians/metres)", frame=label,
                          field="robot_joint_positions")
     return [float(x) for x in q]
+
+
+def _check_robot_joints(specs: list[_FrameSpec], robot: str | None, tj: Path) -> None:
+    """A known robot's joint vectors must have its length (core/model/robots.py)."""
+    model = robot_model(robot)
+    for s in specs:
+        q = s.robot_joint_positions
+        if model is not None and q is not None and len(q) not in model.accepted_lengths():
+            raise InputError(tj, f"has {len(q)} values, but robot {robot!r} needs "
+                             f"{len(model.joints)} ({', '.join(model.joints)}) or "
+                             f"{model.arm_joints} (arm joints only)", frame=s.label,
+                             field="robot_joint_positions")
 
 
 # --- images ------------------------------------------------------------------------------------

@@ -64,7 +64,7 @@ def propose(capture: Capture, out: str | Path, progress: Progress,
     check(capture, options)
     arrays = read_ply(require(out, layout.SPLAT))
     if options.method == "motion":
-        from .motion import propose_motion
+        from .motion.route import propose_motion
         opacity = 1.0 / (1.0 + np.exp(-np.asarray(arrays.opacity_logits, float)))
         joints, meta = propose_motion(capture, arrays.means, opacity,
                                       lambda camera: _render_depth(arrays, camera, options.device),
