@@ -235,10 +235,30 @@ def test_a_mutated_splat_is_read_or_refused_with_a_message(n, degree, edits):
     assert (np.abs(got.quats) > 0).any(axis=1).all()
 
 
-@pytest.mark.parametrize("value, field", [(np.nan, "x"), (np.inf, "opacity"), (-np.inf, "rot_2")])
+@pytest.mark.parametrize("value, field", [(np.nan, "x"), (np.inf, "opacity"), (-np.inf, "rot_2"),
+                                          (np.nan, "f_dc_1"), (np.inf, "f_rest_7")])
 def test_non_finite_values_name_the_element_and_field(tmp_path, value, field):
-    splat = _splat(5, 1)
-    {"x": splat.means[:, 0], "opacity": splat.opacity_logits, "rot_2": splat.quats[:, 2]}[field][3] = value
-    write_ply(tmp_path / "s.ply", splat)
+    write_ply(tmp_path / "s.ply", _splat(5, 1))
+    poke_ply(tmp_path / "s.ply", 3, field, value)
     with pytest.raises(InputError, match=rf"field '{field}': element vertex\[3\] is"):
         read_ply(tmp_path / "s.ply")
+
+
+def test_writer_refuses_what_the_reader_would_refuse(tmp_path):
+    splat = _splat(5, 1)
+    splat.quats[2] = 0
+    with pytest.raises(ValueError, match=r"quats\[2, 0\] is the zero quaternion"):
+        write_ply(tmp_path / "s.ply", splat)
+    assert not list(tmp_path.iterdir())
+
+
+def poke_ply(path: Path, row: int, field: str, value: float) -> None:
+    """Set one float32 value of a binary little-endian PLY written by write_ply (which itself
+    refuses to write values no splat can hold)."""
+    data = bytearray(path.read_bytes())
+    head_end = data.index(b"end_header\n") + len(b"end_header\n")
+    names = [line.split()[-1] for line in data[:head_end].decode().splitlines()
+             if line.startswith("property")]
+    offset = head_end + 4 * (row * len(names) + names.index(field))
+    data[offset:offset + 4] = np.float32(value).tobytes()
+    path.write_bytes(bytes(data))
