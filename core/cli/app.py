@@ -73,6 +73,11 @@ def _run(args: argparse.Namespace, progress: Progress) -> int:
         if isinstance(exc, ArtgsError):
             progress.error(str(exc))
             return protocol.EXIT_FAILED
+        if isinstance(exc, OSError) and exc.strerror:   # disk full, permissions changed, ...
+            where = f"{exc.filename}: " if exc.filename else ""
+            progress.error(f"{where}{exc.strerror}; files in the output folder are as before "
+                           "the failed write")
+            return protocol.EXIT_FAILED
         raise
     return int(code or 0)
 
