@@ -13,7 +13,8 @@ import trimesh
 import yourdfpy
 
 from artgs.core.model.capture import load_capture
-from artgs.core.cli.main import CATEGORIES, main
+from artgs.core.cli import main
+from artgs.core.model.categories import CATEGORIES
 from artgs.core.model.joints import read_articulation
 from artgs.core.synth.generate import generate_object, generate_set
 from artgs.core.synth.objects import box_distance, random_spec

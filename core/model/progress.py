@@ -1,12 +1,7 @@
 """Progress reporting for long stages: human text, JSON lines for the add-on, or nothing.
 
-JSON lines (one object per line on stdout) are the worker protocol the Blender add-on reads:
-
-- ``{"event": "progress", "stage": S, "fraction": F, "message": M, "figures": {...}}``
-- ``{"event": "stage_done", "stage": S, "seconds": T, "figures": {...}}``
-- ``{"event": "log", "level": "info"|"warning", "message": M}``
-- ``{"event": "error", "message": M}`` (then a non-zero exit)
-- ``{"event": "finished", "outputs": {...}}``
+JSON lines (one object per line on stdout) are the worker protocol the Blender add-on reads; the
+event names are in :mod:`.protocol`.
 """
 
 from __future__ import annotations
@@ -16,6 +11,7 @@ import sys
 import time
 from typing import Any, Callable, TextIO
 
+from . import protocol as P
 from .errors import Cancelled
 
 MODES = ("text", "json", "quiet")
@@ -50,7 +46,7 @@ class Progress:
         self.check_cancel()
         fraction = float(min(max(fraction, 0.0), 1.0))
         if self.mode == "json":
-            self._emit({"event": "progress", "stage": stage, "fraction": fraction,
+            self._emit({P.EVENT: P.PROGRESS, "stage": stage, "fraction": fraction,
                         "message": message, "figures": _plain(figures)})
         elif self.mode == "text":
             now = time.perf_counter()
@@ -64,7 +60,7 @@ class Progress:
         """Mark ``stage`` done; returns its duration in seconds."""
         seconds = time.perf_counter() - self._stage_start.pop(stage, time.perf_counter())
         if self.mode == "json":
-            self._emit({"event": "stage_done", "stage": stage, "seconds": seconds,
+            self._emit({P.EVENT: P.STAGE_DONE, "stage": stage, "seconds": seconds,
                         "figures": _plain(figures)})
         elif self.mode == "text":
             extra = " ".join(f"{k}={_fmt(v)}" for k, v in figures.items())
@@ -75,7 +71,7 @@ class Progress:
     def log(self, message: str, level: str = "info") -> None:
         """A note for the user (warnings are shown even in quiet mode, on stderr)."""
         if self.mode == "json":
-            self._emit({"event": "log", "level": level, "message": message})
+            self._emit({P.EVENT: P.LOG, "level": level, "message": message})
         elif self.mode == "text" or level == "warning":
             stream = self.stream if self.mode == "text" else sys.stderr
             stream.write(f"{level}: {message}\n" if level != "info" else f"{message}\n")
@@ -84,7 +80,7 @@ class Progress:
     def error(self, message: str) -> None:
         """Report a fatal error (the caller then exits non-zero)."""
         if self.mode == "json":
-            self._emit({"event": "error", "message": message})
+            self._emit({P.EVENT: P.ERROR, "message": message})
         else:
             sys.stderr.write(f"error: {message}\n")
             sys.stderr.flush()
@@ -92,7 +88,7 @@ class Progress:
     def finished(self, **outputs: Any) -> None:
         """Report that the whole command is done."""
         if self.mode == "json":
-            self._emit({"event": "finished", "outputs": _plain(outputs)})
+            self._emit({P.EVENT: P.FINISHED, "outputs": _plain(outputs)})
 
     def check_cancel(self) -> None:
         """Raise :class:`Cancelled` if the cancel callback says so."""

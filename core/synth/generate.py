@@ -35,7 +35,7 @@ import numpy as np
 
 from ..model import atomic
 from ..model.cameras import Camera, intrinsics, look_at
-from ..cli.main import CATEGORIES
+from ..model.categories import CATEGORIES
 from ..model.errors import InputError
 from ..model.joints import Articulation, Joint, write_articulation
 from ..model.progress import QUIET, Progress
@@ -101,16 +101,6 @@ def generate_set(out: str | Path, categories: list[str] | tuple[str, ...] | None
                         seconds=round(time.perf_counter() - t0, 2))
     progress.finish("synth", objects=len(paths))
     return paths
-
-
-def synth_command(args, progress: Progress) -> int:
-    """The ``artgs synth`` command."""
-    paths = generate_set(args.out, args.category, args.per_category, args.seed, progress,
-                         width=args.width, height=args.height, static_views=args.static_views,
-                         steps=args.steps, depth_noise=args.depth_noise,
-                         simultaneous=args.simultaneous)
-    progress.finished(captures=[str(p) for p in paths])
-    return 0
 
 
 def interaction_schedule(spec: ObjectSpec, steps: int, simultaneous: bool

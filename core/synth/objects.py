@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cli.main import CATEGORIES
+from ..model.categories import CATEGORIES
 from ..model.joints import Joint
 
 Rgba = tuple[float, float, float, float]

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ....cli.main import CATEGORIES
+from ....model.categories import CATEGORIES
 
 #: Synonyms -> the seven categories; the earliest mention in the answer wins (longer on ties).
 CATEGORY_SYNONYMS: dict[str, str] = {
