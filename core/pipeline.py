@@ -18,6 +18,7 @@ from .model.capture import Capture, load_capture
 from .model.joints import Articulation, read_articulation, write_articulation
 from .model.progress import Progress
 from .model.registry import StageSpec
+from .resume import resume_since, stage_finished
 
 
 def resolve(ref: str) -> Callable[..., Any]:
@@ -66,12 +67,13 @@ def run_stage(spec: StageSpec | str, out: str | Path, options: Any, progress: Pr
 
 
 def run(capture_dir: str | Path, out: str | Path, progress: Progress,
-        options: dict[str, Any] | None = None) -> Articulation:
+        options: dict[str, Any] | None = None, *, resume: bool = False) -> Articulation:
     """Every registered stage in order on one capture; returns the articulation in OUT.
 
     ``options``: per stage name, its options dataclass (defaults for the others). Every stage's
     check runs before the first stage starts. While no stage writes ``articulation.json``, the
-    proposals are written as it, marked ``"optimised": false``.
+    proposals are written as it, marked ``"optimised": false``. ``resume``: a stage already
+    finished in OUT for this capture (:func:`core.resume.stage_finished`) is not run again.
     """
     options = {s.name: (options or {}).get(s.name) or s.options() for s in registry.STAGES}
     out = Path(out)
@@ -82,7 +84,11 @@ def run(capture_dir: str | Path, out: str | Path, progress: Progress,
         check_stage(spec, capture, options[spec.name])
     progress.finish("validate", frames=len(capture.frames), interaction=len(capture.interaction))
 
+    since = resume_since(out, capture_dir) if resume else None
     for spec in registry.STAGES:
+        if since is not None and stage_finished(spec, out, since):
+            progress.log(f"{spec.name}: already done, skipped")
+            continue
         run_stage(spec, out, options[spec.name], progress, capture=capture)
 
     if registry.producer_of(layout.ARTICULATION) is None:

@@ -55,15 +55,25 @@ def stage_finished(spec: StageSpec, out: str | Path, since: float) -> bool:
     return min(written) >= max([since, *read])
 
 
-def complete(out: str | Path, capture: str | Path) -> bool:
-    """Every stage of ``capture``'s run is finished in ``out`` and newer than the capture."""
-    out, capture = Path(out), Path(capture)
+def resume_since(out: str | Path, capture: str | Path) -> float | None:
+    """The time stages in ``out`` must be newer than to count as finished for ``capture``.
+
+    None when nothing in ``out`` can be reused: no report, or the report of another capture.
+    """
     try:
         recorded = layout.read_report(out).get("capture")
     except (ArtgsError, OSError, ValueError):
-        return False
-    since = inputs_mtime(capture)
-    if not since or recorded != str(capture.resolve()) or "run" not in _stages(out):
+        return None
+    if recorded != str(Path(capture).resolve()):
+        return None
+    return inputs_mtime(capture)
+
+
+def complete(out: str | Path, capture: str | Path) -> bool:
+    """Every stage of ``capture``'s run is finished in ``out`` and newer than the capture."""
+    out = Path(out)
+    since = resume_since(out, capture)
+    if not since or "run" not in _stages(out):
         return False
     if not all(stage_finished(s, out, since) for s in registry.STAGES):
         return False

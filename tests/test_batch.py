@@ -160,7 +160,7 @@ def _wait_for(path: Path, text: str, proc: subprocess.Popen, timeout: float = 12
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_worker_killed_mid_way_is_run_again(backend, captures, reference, tmp_path):
     out = tmp_path / "batch"
-    proc = _start("batch", str(captures["cabinet"]), "--out", str(out), "--workers", "1",
+    proc = _start("batch", str(captures["cabinet"]), "--out", str(out), "--workers", "2",
                   "--iterations", ITERATIONS, "--quiet", *_backend_flags(backend))
     log = _wait_for(out / "cabinet.log", "[reconstruct]", proc)
     pid = int(log.split(", pid ", 1)[1].split(",", 1)[0])
@@ -191,7 +191,8 @@ def test_local_pool_gives_up_on_a_capture_whose_worker_keeps_dying(captures, tmp
 def test_ctrl_c_stops_cleanly_and_the_next_call_resumes_after_the_finished_stage(
         captures, reference, tmp_path):
     out = tmp_path / "batch"
-    args = ("batch", str(captures["cabinet"]), "--out", str(out), "--iterations", ITERATIONS)
+    args = ("batch", str(captures["cabinet"]), "--out", str(out), "--workers", "2",
+            "--iterations", ITERATIONS)
     proc = _start(*args)
     _wait_for(out / "cabinet.log", "[propose]", proc)
     splat_mtime = (out / "cabinet" / "splat.ply").stat().st_mtime_ns

@@ -82,14 +82,14 @@ def _success(stages: dict[str, Any]) -> Any:
 
 
 def totals(rows: list[dict[str, Any]], wall_seconds: float, workers: int, backend: str) -> dict:
-    """Counts per status, wall time and throughput (captures run to the end per hour)."""
+    """Counts per status, wall time and throughput (captures run successfully per hour)."""
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
-    ran = counts["ok"] + counts["failed"]
     accurate = [r for r in rows if r["ae_mean_deg"] is not None]
     out: dict[str, Any] = {
         "captures": len(rows), **counts, "wall_seconds": round(wall_seconds, 2),
         "workers": workers, "backend": backend,
-        "captures_per_hour": round(3600.0 * ran / wall_seconds, 1) if ran and wall_seconds else None,
+        "captures_per_hour": round(3600.0 * counts["ok"] / wall_seconds, 1)
+        if counts["ok"] and wall_seconds else None,
     }
     if accurate:
         out["type_accuracy"] = float(np.mean([r["type_accuracy"] for r in accurate]))
@@ -136,7 +136,7 @@ def table(rows: list[dict[str, Any]], total: dict[str, Any]) -> str:
             r["name"], r["status"], str(r["attempts"] or ""), _cell(r["seconds"]),
             r["types"] or ("" if r["joints"] is None else "0"), _cell(r["type_accuracy"]),
             _pair(r["ae_mean_deg"], r["ae_max_deg"]), _pair(r["oe_mean_cm"], r["oe_max_cm"]),
-            _cell(r["success"]), (r["message"] or "")[:100]))
+            _cell(r["success"]), r["message"] or ""))
     widths = [max(len(ln[i]) for ln in lines) for i in range(len(head))]
     text = "\n".join("  ".join(c.ljust(w) for c, w in zip(ln, widths)).rstrip() for ln in lines)
     counts = ", ".join(f"{total[s]} {s}" for s in STATUSES if total.get(s))
