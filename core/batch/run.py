@@ -74,14 +74,12 @@ def run_batch(captures: list[str | Path], out_dir: str | Path, stage_options: di
     todo: list[Job] = []
     skipped: list[Job] = []
     for job in jobs:
-        same = previous.get(job.name, {}).get("options", record) == record
-        if not options.force and same and complete(job.out, job.capture):
+        # outputs are reused only where the capture last ran with these options (or no record)
+        reuse = not options.force and previous.get(job.name, {}).get("options") in (None, record)
+        if reuse and complete(job.out, job.capture):
             skipped.append(job)
         else:
-            todo.append(job)
-    # stages may be resumed only where the capture's last run had these options
-    todo = [dataclasses.replace(j, resume=not options.force and previous.get(j.name, {}).get(
-        "options", record) == record) for j in todo]
+            todo.append(dataclasses.replace(job, resume=reuse))
     for job in todo:
         job.log.parent.mkdir(parents=True, exist_ok=True)
         job.log.write_text("", encoding="utf-8")
@@ -113,7 +111,7 @@ def run_batch(captures: list[str | Path], out_dir: str | Path, stage_options: di
         outcome = outcomes.get(job.name)
         r = summary.row(job, outcome, "skipped" if job in skipped else
                         "cancelled" if job.name in interrupted else None)
-        ran = r["status"] in ("ok", "skipped") or job.name in outcomes
+        ran = job in skipped or job.name in outcomes or job.name in interrupted
         r["options"] = record if ran else previous.get(job.name, {}).get("options")
         rows.append(r)
     backend = "ray" if options.ray else "local"
