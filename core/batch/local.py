@@ -35,14 +35,17 @@ def core_shares(workers: int, cores: list[int] | None = None) -> list[list[int]]
 def _child(job: Job, settings: Settings, cores: list[int], conn: Connection) -> None:
     """Worker process body: pin, limit threads, run, send the outcome."""
     signal.signal(signal.SIGTERM, _raise_interrupt)
-    os.sched_setaffinity(0, cores)
-    limit_threads_env(len(cores))
     try:
-        conn.send(run_job(job, settings, len(cores)))
-    except KeyboardInterrupt:   # stopped before run_job caught it
-        conn.send(Outcome("cancelled", "cancelled", pid=os.getpid()))
-    finally:
-        conn.close()
+        os.sched_setaffinity(0, cores)
+        limit_threads_env(len(cores))
+        outcome = run_job(job, settings, len(cores))
+    except KeyboardInterrupt:   # stopped before run_job could catch it
+        outcome = Outcome("cancelled", "cancelled", pid=os.getpid())
+    # a second Ctrl-C (the terminal's SIGINT, then the driver's SIGTERM) must not lose the outcome
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    conn.send(outcome)
+    conn.close()
 
 
 def _raise_interrupt(signum, frame) -> None:  # noqa: ARG001

@@ -51,12 +51,16 @@ def run_ray(jobs: list[Job], settings: Settings, address: str | None, workers: i
     env = {"OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
     if own:
         ray.init(address="local", _node_ip_address="127.0.0.1", num_cpus=workers * cpus,
-                 num_gpus=gpus * workers if gpus else None, include_dashboard=False,
-                 log_to_driver=False, configure_logging=False,
+                 include_dashboard=False, log_to_driver=False, configure_logging=False,
                  runtime_env={"env_vars": env})
     else:
         ray.init(address=address, log_to_driver=False, configure_logging=False,
                  runtime_env={"env_vars": env})
+    try:
+        _check_resources(ray.cluster_resources(), cpus, gpus)
+    except ArtgsError:
+        ray.shutdown()
+        raise
     remote = ray.remote(_task).options(num_cpus=cpus, num_gpus=gpus, max_retries=retries)
     pending: dict[Any, Job] = {}
     waiting = set()     # submitted, not yet started (a task starts by writing its log)
@@ -85,6 +89,14 @@ def run_ray(jobs: list[Job], settings: Settings, address: str | None, workers: i
     finally:
         if own:
             ray.shutdown()
+
+
+def _check_resources(have: dict[str, float], cpus: int, gpus: float) -> None:
+    """Refuse a task size no node can hold (Ray would otherwise wait for it forever)."""
+    for name, need in (("CPU", cpus), ("GPU", gpus)):
+        if need > have.get(name, 0.0):
+            raise ArtgsError(f"each capture asks for {need:g} {name}(s) but the Ray cluster has "
+                             f"{have.get(name, 0.0):g}; lower --{name.lower()}s-per-capture")
 
 
 def _log_started(job: Job) -> bool:

@@ -36,7 +36,7 @@ class BatchOptions:
     address: str | None = None       # Ray cluster to connect to (None: start one on 127.0.0.1)
     retries: int = 2                 # restarts of a capture whose worker died
     cpus: int = 1                    # Ray: CPUs per capture task (local: the slot's share)
-    gpus: float = 0.0                # Ray: GPUs per capture task
+    gpus: float | None = None        # Ray: GPUs per capture task (None: 1 if --device cuda)
     force: bool = False              # re-run captures and stages that are already done
 
 
@@ -131,7 +131,10 @@ def _run(jobs: list[Job], settings: Settings, options: BatchOptions, workers: in
     if options.ray:
         from .ray_pool import run_ray
 
-        run_ray(jobs, settings, options.address, workers, max(1, options.cpus), options.gpus,
+        gpus = options.gpus
+        if gpus is None:
+            gpus = float(any(getattr(o, "device", None) == "cuda" for o in settings.options.values()))
+        run_ray(jobs, settings, options.address, workers, max(1, options.cpus), gpus,
                 options.retries, bar.started, ended, bar.retrying)
     else:
         from .local import run_local

@@ -28,8 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "ADDRESS on a private Ray started on 127.0.0.1 (needs artgs[batch])")
     p.add_argument("--cpus-per-capture", type=int, default=1, metavar="C",
                    help="--ray: CPUs each capture's task asks for")
-    p.add_argument("--gpus-per-capture", type=float, default=0.0, metavar="G",
-                   help="--ray: GPUs each capture's task asks for (e.g. 1 with --device cuda)")
+    p.add_argument("--gpus-per-capture", type=float, default=None, metavar="G",
+                   help="--ray: GPUs each capture's task asks for (default: 1 with --device "
+                        "cuda, else 0)")
     p.add_argument("--retries", type=int, default=2,
                    help="restarts of a capture whose worker process died (killed, out of memory)")
     p.add_argument("--force", action="store_true",
@@ -46,7 +47,8 @@ def run(args: argparse.Namespace, progress: Progress) -> int:
     captures: list[str | Path] = list(args.captures)
     if args.list:
         captures += read_list(args.list)
-    if args.workers < 1 or args.retries < 0 or args.cpus_per_capture < 1 or args.gpus_per_capture < 0:
+    if args.workers < 1 or args.retries < 0 or args.cpus_per_capture < 1 or \
+            (args.gpus_per_capture or 0.0) < 0:
         raise InputError("command line", "--workers and --cpus-per-capture must be at least 1, "
                          "--retries and --gpus-per-capture at least 0")
     options = BatchOptions(workers=args.workers, ray=args.ray is not None,
