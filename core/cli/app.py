@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 
 from ..model import protocol, registry
-from ..model.errors import ArtgsError, Cancelled, InputError
+from ..model.errors import ArtgsError, InputError
+from ..model.interrupt import cancel_on_signals, ignore_further_interrupts, interrupted
 from ..model.progress import Progress
 from . import batch, bench, capture_preview, check_env, run, stage, synth, validate
 
@@ -46,10 +46,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _terminate(signum, frame) -> None:  # noqa: ARG001
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``artgs`` command."""
     args = build_parser().parse_args(argv)
@@ -58,18 +54,26 @@ def main(argv: list[str] | None = None) -> int:
     # torch's OpenMP threads busy-wait between ops and starve the numba rasterizer's threads
     # (measured up to 10x slower on 2 cores); must be set before torch is imported.
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    signal.signal(signal.SIGTERM, _terminate)
+    with cancel_on_signals():
+        return _run(args, progress)
+
+
+def _run(args: argparse.Namespace, progress: Progress) -> int:
+    """Run the command; map errors to exit codes and one line of message."""
     try:
         code = args.handler(args, progress)
-    except InputError as exc:
-        progress.error(str(exc))
-        return protocol.EXIT_BAD_INPUT
-    except (KeyboardInterrupt, Cancelled):
-        progress.error("cancelled")
-        return protocol.EXIT_CANCELLED
-    except ArtgsError as exc:
-        progress.error(str(exc))
-        return protocol.EXIT_FAILED
+    except BaseException as exc:   # noqa: BLE001 - a cancel can surface as any exception type
+        ignore_further_interrupts()   # a second Ctrl-C must not turn this report into a traceback
+        if isinstance(exc, InputError):
+            progress.error(str(exc))
+            return protocol.EXIT_BAD_INPUT
+        if interrupted(exc):
+            progress.error("cancelled; the interrupted stage changed no file")
+            return protocol.EXIT_CANCELLED
+        if isinstance(exc, ArtgsError):
+            progress.error(str(exc))
+            return protocol.EXIT_FAILED
+        raise
     return int(code or 0)
 
 

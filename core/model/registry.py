@@ -34,6 +34,15 @@ def option(default: Any, help: str, **meta: Any) -> Any:  # noqa: A002 - argpars
     return field(default=default, metadata={"help": help, **meta})
 
 
+#: Default working resolution (longer image side, pixels): what 2 CPU cores reconstruct in minutes.
+MAX_SIDE = 640
+
+
+def _max_side() -> Any:
+    return option(MAX_SIDE, "working resolution: frames whose longer side is larger are shrunk "
+                  "to this many pixels on load, intrinsics scaled (0: as captured)", shared=True)
+
+
 def _device() -> Any:
     return option("auto", "where torch work runs (auto: CUDA with gsplat if available, else CPU)",
                   choices=DEVICES, shared=True)
@@ -46,6 +55,7 @@ class ReconstructOptions:
     iterations: int | None = option(None, "iteration cap (default: until converged)")
     holdout: int = option(0, "static views held out for evaluation")
     device: str = _device()
+    max_side: int = _max_side()
 
 
 @dataclass
@@ -58,7 +68,9 @@ class ProposeOptions:
                                       "http://127.0.0.1:8000/v1 (default: $ARTGS_VLM_ENDPOINT)",
                                       shared=True)
     vlm_model: str | None = option(None, "model name (default: $ARTGS_VLM_MODEL)", shared=True)
-    vlm_timeout: float = option(60.0, "seconds per request", shared=True)
+    vlm_timeout: float = option(60.0, "seconds for each VLM request, retries included",
+                                shared=True)
+    max_side: int = _max_side()
 
 
 @dataclass(frozen=True)

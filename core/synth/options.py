@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from ..model.categories import CATEGORIES
 from ..model.registry import option
+from ..model.robots import ROBOTS
 
 
 @dataclass
@@ -23,3 +24,5 @@ class SynthOptions:
     steps: int = option(6, "interaction steps per joint")
     depth_noise: float = option(0.0, "depth noise std-dev, metres")
     simultaneous: bool = option(False, "also move two joints at once in the interaction sequence")
+    robot: str | None = option(None, "robot arm that opens the parts in the interaction frames "
+                               "(in RGB and depth, not in the masks)", choices=tuple(ROBOTS))
