@@ -98,11 +98,11 @@ def run(capture_dir: str | Path, out: str | Path, progress: Progress,
     options = {s.name: (options or {}).get(s.name) or s.options() for s in registry.STAGES}
     out = Path(out)
     with claim_out(out, "artgs run"):
-        return _run(Path(capture_dir), out, progress, options)
+        return _run(Path(capture_dir), out, progress, options, resume)
 
 
-def _run(capture_dir: Path, out: Path, progress: Progress,
-         options: dict[str, Any]) -> Articulation:
+def _run(capture_dir: Path, out: Path, progress: Progress, options: dict[str, Any],
+         resume: bool) -> Articulation:
     start = time.perf_counter()
     progress.start("validate", "checking the capture")
     max_side = next((m for m in map(_max_side, options.values()) if m is not None), None)

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from ..resume import complete
+from ..model.outdir import claim_out
 from ..model.progress import Progress
 from . import summary
 from .bar import BatchBar
@@ -67,7 +68,12 @@ def run_batch(captures: list[str | Path], out_dir: str | Path, stage_options: di
     """
     out_dir = Path(out_dir)
     jobs = plan(captures, out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with claim_out(out_dir, "artgs batch"):   # one batch per DIR at a time
+        return _run_batch(jobs, out_dir, stage_options, options, progress)
+
+
+def _run_batch(jobs: list[Job], out_dir: Path, stage_options: dict[str, Any],
+               options: BatchOptions, progress: Progress) -> BatchResult:
     record = options_record(stage_options)
     previous = {r.get("name"): r for r in summary.read_previous(out_dir).get("captures", [])
                 if isinstance(r, dict)}
