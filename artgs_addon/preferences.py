@@ -38,6 +38,11 @@ def engine_python(context: bpy.types.Context | None = None) -> str:
     return bpy.path.abspath(get(context).engine_python) or default_engine()
 
 
+def preview_cap(context: bpy.types.Context) -> int:
+    """Points allowed in a preview: the preference's cap times the scene's density."""
+    return max(1, int(get(context).preview_cap * context.scene.artgs.preview_density))
+
+
 #: Outcome of the last "Check Engine" (kept in memory only, shown in the preferences).
 last_check: list[str] = []
 

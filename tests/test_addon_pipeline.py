@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from artgs.core.model.joints import read_articulation
-from artgs.core.synth.generate import generate_object
+from engine_env import generate_capture as generate_object
 
 pytest.importorskip("bpy")
 ROOT = Path(__file__).resolve().parent.parent
