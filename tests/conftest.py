@@ -1,9 +1,15 @@
-"""``--blender-only``: collect only the Blender-side test files (those that start with
+"""Blender's user folders kept out of the developer's home; ``--blender-only``: collect only the Blender-side test files (those that start with
 ``pytest.importorskip("bpy")``), for the bpy 5.x half of `make test`, whose venv has no engine."""
 
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
+
+# Blender's user folders (preferences, the add-on's engine.json) in a temporary folder, never the
+# developer's own: set before any test imports bpy.
+os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="artgs-blender-user-"))
 
 _MARK = 'importorskip("bpy")'
 
