@@ -30,6 +30,7 @@ _COMMANDS: dict[str, str] = {
     "reconstruct": "stages.reconstruct:reconstruct_command",
     "propose": "stages.propose.stage:propose_command",
     "check-env": "model.envcheck:check_env_command",
+    "contact-sheet": "render.contact_sheet:contact_sheet_command",
     "bench-render": "bench.render:bench_render_command",
     "bench-reconstruct": "bench.reconstruct:bench_reconstruct_command",
     "bench-propose": "bench.propose:bench_propose_command",
@@ -115,6 +116,14 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p)
 
     p = sub.add_parser("check-env", help="check that the engine has every dependency")
+    _common(p)
+
+    p = sub.add_parser("contact-sheet", help="labelled pictures of every stage's result -> OUT/preview.png")
+    p.add_argument("out")
+    p.add_argument("--capture", default=None, help="capture folder (default: the one recorded in OUT)")
+    p.add_argument("--output", default=None, help="PNG to write (default: OUT/preview.png)")
+    p.add_argument("--panels", default=None, help="also write each labelled panel as DIR/<stage>.png")
+    p.add_argument("--width", type=int, default=240, help="width of one panel, pixels")
     _common(p)
 
     p = sub.add_parser("bench-render", help="rasterizer speed benchmark")
