@@ -128,7 +128,21 @@ def _assert_joints_equal(got: list[Joint], want: list[Joint], tol: float = 1e-6)
         for key in ("axis", "origin", "limit"):
             np.testing.assert_allclose(gd[key], wd[key], atol=tol, err_msg=f"{g.name}.{key}")
         for key in set(wd) - {"axis", "origin", "limit"}:
-            assert gd[key] == wd[key], f"{g.name}.{key}"
+            assert _close(gd[key], wd[key], tol), f"{g.name}.{key}: {gd[key]} != {wd[key]}"
+
+
+def _close(got, want, tol: float = 1e-6) -> bool:
+    """Equal, numbers within ``tol`` (a Blender round trip may change the last bits, which
+    differ between CPUs), recursing into dicts and lists."""
+    if isinstance(want, dict):
+        return isinstance(got, dict) and set(got) == set(want) and all(
+            _close(got[k], want[k], tol) for k in want)
+    if isinstance(want, (list, tuple)):
+        return isinstance(got, (list, tuple)) and len(got) == len(want) and all(
+            _close(a, b, tol) for a, b in zip(got, want))
+    if isinstance(want, float) or isinstance(got, float):
+        return isinstance(got, (int, float)) and got == pytest.approx(want, abs=tol)
+    return got == want
 
 
 def test_register_unregister_leaves_nothing_behind(addon):
@@ -327,8 +341,8 @@ def test_edit_mode_changes_are_read_as_user_joints(ctx):
     assert door.source == "user" and door.type == "revolute"
     np.testing.assert_allclose(door.origin, head, atol=1e-5)
     np.testing.assert_allclose(door.axis, np.array((tail - head).normalized()), atol=1e-6)
-    assert door.extent == art.joints[0].extent and door.handle == art.joints[0].handle
-    assert door.confidence == 0.8 and door.limit == pytest.approx((-0.2, 1.4), abs=1e-6)
+    assert _close(door.extent, art.joints[0].extent) and _close(door.handle, art.joints[0].handle)
+    assert door.confidence == pytest.approx(0.8) and door.limit == pytest.approx((-0.2, 1.4), abs=1e-6)
     _assert_joints_equal([joints["drawer"]], [art.joints[1]])  # untouched: as built
     bpy.ops.object.mode_set(mode="OBJECT")
     # a limit edited in the panel also makes the joint the user's, and the constraint follows
@@ -424,7 +438,7 @@ def test_bone_added_by_hand_is_saved_as_a_user_joint_with_locks(ctx, tmp_path):
     assert (lid.type, lid.source, lid.child) == ("revolute", "user", "lid_link")
     np.testing.assert_allclose(lid.axis, (1, 0, 0), atol=1e-6)
     np.testing.assert_allclose(lid.origin, (0, 0, 1), atol=1e-6)
-    assert saved["door"].to_dict() == _articulation().joints[0].to_dict()
+    _assert_joints_equal([saved["door"]], [_articulation().joints[0]])
     pb = obj.pose.bones["lid"]
     assert len(pb.constraints) == 2 and tuple(pb.lock_rotation) == (True, False, True)
 

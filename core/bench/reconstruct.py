@@ -22,6 +22,7 @@ from ..model.categories import CATEGORIES
 from ..model.errors import InputError
 from ..model.progress import Progress
 from ..stages.reconstruct import ReconstructConfig, reconstruct
+from .options import BenchReconstructOptions
 
 HOLDOUT = 4
 TARGET_PSNR, TARGET_MAE_MM, TARGET_SECONDS = 30.0, 5.0, 60.0
@@ -103,7 +104,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def bench_reconstruct_command(args, progress: Progress) -> int:
+def bench_reconstruct(args: BenchReconstructOptions, progress: Progress) -> int:
     """``artgs bench-reconstruct [--data DIR] [--per-category N] [--seed S] [--device D]``."""
     progress.start("bench-reconstruct")
     with tempfile.TemporaryDirectory(prefix="artgs_benchset_") as tmp:

@@ -18,12 +18,13 @@ import time
 import numba
 import numpy as np
 import torch
-from numba import njit
 
 from ..render.cpu import blend_kernels as rk
+from ..render.cpu.jit import kernel
 from ..render.cpu.project import project
 from ..render.rasterize import rasterize
 from ..render.sh import rgb_to_sh0
+from .options import BenchRenderOptions
 
 THREADS = 2
 AUTOGRAD_BUDGET_BYTES = 3e9  # the reference's fwd+bwd is skipped above this estimate
@@ -45,7 +46,7 @@ def shell_scene(n: int, size: int, seed: int = 0):
     return [means, quats, log_scales, torch.log(op / (1 - op)), sh], K, np.eye(4)
 
 
-@njit(cache=True)
+@kernel
 def _count_pairs(feats, offsets, ids, width, height):
     """Gaussian-pixel pairs blended by the forward kernel (same rules)."""
     tw, th = rk.TILE_W, rk.TILE_H
@@ -132,7 +133,7 @@ def bench_one(size: int, n: int, backend: str, runs: int, grad: bool, low_pass: 
     return _time(step, runs)
 
 
-def bench_render_command(args, progress) -> int:
+def bench_render(args: BenchRenderOptions, progress) -> int:
     """Print forward / forward+backward timings of the CPU kernels and the reference."""
     torch.set_num_threads(THREADS)
     numba.set_num_threads(min(THREADS, numba.config.NUMBA_NUM_THREADS))

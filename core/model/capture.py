@@ -30,6 +30,9 @@ Decisions where the format leaves room (also the documentation of what is accept
   is checked here so every command refuses such a capture before any work.
 - Poses: ``transform_matrix`` must be a finite 4x4 rigid transform: bottom row ``[0, 0, 0, 1]``,
   rotation part orthonormal within 1e-3 with determinant +1 (scaled or mirrored poses are refused).
+- ``robot_joint_positions``: finite numbers; when ``robot`` is one of core/model/robots.py, as many
+  as its actuated joints (or its arm joints alone). ``robot_base_pose`` (optional, top level, world
+  <- robot base) is checked like a camera pose.
 - Unknown keys are ignored.
 """
 
@@ -47,6 +50,7 @@ import numpy as np
 from .cameras import Camera, intrinsics
 from .errors import InputError
 from .jsonio import read_json_object
+from .robots import robot_model
 
 PHASES = ("static", "interaction")
 CAMERA_MODELS = ("PINHOLE", "OPENCV")
@@ -92,6 +96,7 @@ class Capture:
     frames: list[Frame]
     robot: str | None = None
     meta: dict = field(default_factory=dict)
+    robot_base_pose: np.ndarray | None = None   # 4x4 world <- robot base (None: not given)
 
     @property
     def static(self) -> list[Frame]:
@@ -127,8 +132,14 @@ class _FrameSpec:
     robot_joint_positions: list[float] | None
 
 
-def load_capture(path: str | Path) -> Capture:
-    """Read and validate the capture folder ``path`` (or its transforms.json); see the module doc."""
+def load_capture(path: str | Path, max_side: int | None = None) -> Capture:
+    """Read and validate the capture folder ``path`` (or its transforms.json); see the module doc.
+
+    ``max_side``: the working resolution; frames whose longer side is larger are shrunk to it
+    on load (intrinsics scaled with them), so big frames cost no more memory than small ones.
+    """
+    if max_side is not None and (not isinstance(max_side, int) or max_side < 8):
+        raise InputError("--max-side", f"must be a whole number of pixels >= 8, not {max_side!r}")
     path = Path(path)
     root = path.parent if path.name == TRANSFORMS and path.is_file() else path
     if not root.is_dir():
@@ -146,7 +157,10 @@ def load_capture(path: str | Path) -> Capture:
     if robot is not None and not isinstance(robot, str):
         raise InputError(tj, f"must be a robot model name (a string), not {robot!r}", field="robot")
 
+    base = top.get("robot_base_pose")
+    base = None if base is None else _pose(base, tj, None, "robot_base_pose")
     specs = [_parse_frame(i, raw, top, tj, root) for i, raw in enumerate(frames_raw)]
+    _check_robot_joints(specs, robot, tj)
     if not any(s.phase == "static" and s.depth_path is not None for s in specs):
         raise InputError(tj, "no static frame with depth: reconstruction needs static RGB-D views "
                          "(phase 'static' and a depth_file_path)", field="frames")
@@ -163,13 +177,16 @@ def load_capture(path: str | Path) -> Capture:
     # cv2 decodes without the GIL; map() yields in order, so the first bad frame is reported.
     pool = ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1))
     try:
-        frames = list(pool.map(lambda s: _load_frame(s, float(scale), maps), specs))
+        frames = list(pool.map(lambda s: _load_frame(s, float(scale), maps, max_side), specs))
     finally:
         pool.shutdown(cancel_futures=True)
     meta = {"transforms": {k: v for k, v in top.items() if k != "frames"},
             "depth_unit_scale_factor": float(scale),
-            "undistorted": [s.index for s in specs if s.distortion is not None]}
-    return Capture(root=root, frames=frames, robot=robot, meta=meta)
+            "undistorted": [s.index for s in specs if s.distortion is not None],
+            "max_side": max_side,
+            "resized": {s.index: [s.width, s.height] for s, f in zip(specs, frames)
+                        if f.camera.width != s.width}}
+    return Capture(root=root, frames=frames, robot=robot, meta=meta, robot_base_pose=base)
 
 
 # --- transforms.json ---------------------------------------------------------------------------
@@ -261,8 +278,7 @@ def _distortion(lookup, tj: Path, label: str) -> np.ndarray | None:
     return dist
 
 
-def _pose(value: Any, tj: Path, label: str) -> np.ndarray:
-    f = "transform_matrix"
+def _pose(value: Any, tj: Path, label: str | None, f: str = "transform_matrix") -> np.ndarray:
     if value is None:
         raise InputError(tj, "missing the 4x4 camera-to-world matrix", frame=label, field=f)
     if not (isinstance(value, list) and len(value) == 4
@@ -324,6 +340,18 @@ def _joint_positions(raw: dict, tj: Path, label: str) -> list[float] | None:
         raise InputError(tj, "must be a list of finite numbers (radians/metres)", frame=label,
                          field="robot_joint_positions")
     return [float(x) for x in q]
+
+
+def _check_robot_joints(specs: list[_FrameSpec], robot: str | None, tj: Path) -> None:
+    """A known robot's joint vectors must have its length (core/model/robots.py)."""
+    model = robot_model(robot)
+    for s in specs:
+        q = s.robot_joint_positions
+        if model is not None and q is not None and len(q) not in model.accepted_lengths():
+            raise InputError(tj, f"has {len(q)} values, but robot {robot!r} needs "
+                             f"{len(model.joints)} ({', '.join(model.joints)}) or "
+                             f"{model.arm_joints} (arm joints only)", frame=s.label,
+                             field="robot_joint_positions")
 
 
 # --- images ------------------------------------------------------------------------------------
@@ -442,7 +470,32 @@ def _undistort_maps(s: _FrameSpec, cache: dict) -> tuple[np.ndarray, np.ndarray]
     return cache[key]
 
 
-def _load_frame(s: _FrameSpec, scale: float, maps: dict) -> Frame:
+def working_size(K: np.ndarray, width: int, height: int, max_side: int
+                 ) -> tuple[np.ndarray, int, int]:
+    """Intrinsics and size of a ``width`` x ``height`` camera shrunk so its longer side is
+    ``max_side``; pixel centres at (j + 0.5, i + 0.5) scale with the image, and so do cx, cy."""
+    factor = max_side / max(width, height)
+    w, h = max(1, round(width * factor)), max(1, round(height * factor))
+    K = K.copy()
+    K[0] *= w / width
+    K[1] *= h / height
+    return K, w, h
+
+
+def resolution_note(capture: Capture) -> str | None:
+    """A line for the log when frames were shrunk to the working resolution, else None."""
+    resized = capture.meta.get("resized") or {}
+    if not resized:
+        return None
+    index = next(iter(resized))
+    frame = next(f for f in capture.frames if f.index == index)
+    w, h = resized[index]
+    return (f"working resolution {frame.camera.width}x{frame.camera.height} "
+            f"(--max-side {capture.meta['max_side']}; {len(resized)} frame(s) captured at up to "
+            f"{w}x{h}, intrinsics scaled)")
+
+
+def _load_frame(s: _FrameSpec, scale: float, maps: dict, max_side: int | None = None) -> Frame:
     rgb = _read_rgb(s)
     depth = _read_depth(s, scale) if s.depth_path is not None else None
     mask = _read_mask(s) if s.mask_path is not None else None
@@ -461,8 +514,20 @@ def _load_frame(s: _FrameSpec, scale: float, maps: dict) -> Frame:
                              borderMode=cv2.BORDER_CONSTANT).astype(bool) & seen
         elif not seen.all():
             mask = seen
+    K, width, height = s.K, s.width, s.height
+    if max_side is not None and max(width, height) > max_side:
+        K, width, height = working_size(K, width, height, max_side)
+        cv2 = _cv2()
+        size = (width, height)
+        rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
+        # nearest (pixel-centre exact): depths and mask labels are never blended across edges
+        if depth is not None:
+            depth = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST_EXACT)
+        if mask is not None:
+            mask = cv2.resize(mask.view(np.uint8), size,
+                              interpolation=cv2.INTER_NEAREST_EXACT).astype(bool)
     return Frame(index=s.index, file_path=s.file_path,
-                 camera=Camera(s.K, s.c2w, s.width, s.height), rgb=rgb, depth=depth, mask=mask,
+                 camera=Camera(K, s.c2w, width, height), rgb=rgb, depth=depth, mask=mask,
                  phase=s.phase, time=s.time, robot_joint_positions=s.robot_joint_positions)
 
 
@@ -487,24 +552,3 @@ def summarize(capture: Capture) -> dict[str, Any]:
         "undistorted_frames": len(capture.meta.get("undistorted", [])),
         "robot": capture.robot,
     }
-
-
-def validate_command(args, progress) -> int:
-    """``artgs validate CAPTURE``: load and check the capture, print a summary."""
-    summary = summarize(load_capture(args.capture))
-    if progress.mode == "text":
-        s = summary
-        sizes = ", ".join(f"{w}x{h}" for w, h in s["image_sizes"])
-        depth = (f"{s['depth_min_m']:.3f} .. {s['depth_max_m']:.3f} m"
-                 if s["depth_min_m"] is not None else "none")
-        print(f"capture {s['capture']}: valid\n"
-              f"  frames: {s['frames']} ({s['static_frames']} static, "
-              f"{s['interaction_frames']} interaction)\n"
-              f"  image size: {sizes}\n"
-              f"  interaction times: {s['interaction_times'] or 'none'}\n"
-              f"  depth: {s['frames_with_depth']} frames, range {depth}\n"
-              f"  masks: {s['frames_with_mask']} frames\n"
-              f"  undistorted on load: {s['undistorted_frames']} frames\n"
-              f"  robot: {s['robot'] or 'none'}")
-    progress.finished(**summary)
-    return 0

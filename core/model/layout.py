@@ -19,9 +19,26 @@ REPORT = "report.json"
 
 
 def read_report(out: str | Path) -> dict[str, Any]:
-    """The run's report (empty if none yet)."""
+    """The run's report (empty if none yet); InputError naming the key when it is malformed."""
     path = Path(out) / REPORT
-    return read_json_object(path) if path.is_file() else {}
+    if not path.exists():
+        return {}
+    report = read_json_object(path)
+    hint = "; fix it or delete report.json (the next stage starts a new one)"
+    capture = report.get("capture")
+    if capture is not None and (not isinstance(capture, str) or not capture):
+        raise InputError(path, f"must be the capture folder's path (a string), not {capture!r}"
+                         + hint, field="capture")
+    stages = report.get("stages")
+    if stages is not None:
+        if not isinstance(stages, dict):
+            raise InputError(path, f"must be an object of stage entries, not {stages!r}" + hint,
+                             field="stages")
+        for name, entry in stages.items():
+            if not isinstance(entry, dict):
+                raise InputError(path, f"must be an object, not {entry!r}" + hint,
+                                 field=f"stages.{name}")
+    return report
 
 
 def update_report(out: str | Path, stage: str | None = None, **fields: Any) -> dict[str, Any]:
@@ -46,11 +63,3 @@ def capture_of(out: str | Path, capture: str | Path | None) -> Path:
         raise InputError(Path(out) / REPORT, "no capture recorded for this output folder; "
                          "pass --capture CAPTURE", field="capture")
     return Path(recorded)
-
-
-def require(out: str | Path, name: str, made_by: str) -> Path:
-    """Path of an input file in OUT, or a clear error naming the stage that makes it."""
-    path = Path(out) / name
-    if not path.is_file():
-        raise InputError(path, f"not found; run `artgs {made_by}` first")
-    return path

@@ -33,6 +33,8 @@ _FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None
 _REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
              "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
 _HEADER_LIMIT = 1 << 16
+#: Largest log scale a Gaussian may have: exp(2 s) (its variance) must stay finite in float32.
+_MAX_LOG_SCALE = 40.0
 
 
 @dataclass
@@ -79,7 +81,7 @@ def write_ply(path: str | Path, splats: SplatArrays) -> None:
     names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
     names += [f"f_rest_{i}" for i in range(3 * (k - 1))]
     names += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
-    rest = np.transpose(splats.sh[:, 1:, :], (0, 2, 1)).reshape(n, -1)  # channel-major
+    rest = np.transpose(splats.sh[:, 1:, :], (0, 2, 1)).reshape(n, 3 * (k - 1))  # channel-major
     columns = np.concatenate([
         splats.means.reshape(n, 3), np.zeros((n, 3), np.float32), splats.sh[:, 0, :], rest,
         splats.opacity_logits.reshape(n, 1), splats.log_scales.reshape(n, 3),
@@ -105,6 +107,9 @@ def read_ply(path: str | Path) -> SplatArrays:
         raise InputError(path, "no 'vertex' element in the PLY header", field="vertex")
     _, count, props = vertex
     names = [name for name, _ in props]
+    duplicate = next((name for i, name in enumerate(names) if name in names[:i]), None)
+    if duplicate is not None:
+        raise InputError(path, f"vertex property '{duplicate}' is declared twice", field=duplicate)
     for name in _REQUIRED:
         if name not in names:
             raise InputError(path, f"missing vertex property '{name}' (not a 3DGS splat file?)",
@@ -119,8 +124,11 @@ def read_ply(path: str | Path) -> SplatArrays:
     for i in range(n_rest):
         if f"f_rest_{i}" not in names:
             raise InputError(path, f"missing vertex property 'f_rest_{i}'", field=f"f_rest_{i}")
+    if count == 0:
+        raise InputError(path, "holds no Gaussians (element vertex 0)", field="vertex")
     table = structured_to_unstructured(_read_vertex(path, fmt, elements, header_len),
                                        dtype=np.float32)
+    _check_values(path, table, names)
     column = {name: i for i, name in enumerate(names)}
 
     def cols(*keys: str) -> np.ndarray:
@@ -135,6 +143,30 @@ def read_ply(path: str | Path) -> SplatArrays:
     return SplatArrays(means=cols("x", "y", "z"), quats=cols("rot_0", "rot_1", "rot_2", "rot_3"),
                        log_scales=cols("scale_0", "scale_1", "scale_2"),
                        opacity_logits=table[:, column["opacity"]].copy(), sh=sh)
+
+
+def _check_values(path: Path, table: np.ndarray, names: list[str]) -> None:
+    """Refuse values no splat can hold, naming the first bad Gaussian (element index) and field:
+    non-finite numbers (or ones that overflow float32), a zero quaternion (no rotation) and log
+    scales whose covariance ``exp(2 scale)`` overflows float32."""
+    used = [i for i, name in enumerate(names) if name in _REQUIRED or name.startswith("f_rest_")]
+    bad = ~np.isfinite(table[:, used])
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise InputError(path, f"element vertex[{row}] is {table[row, used[col]]} (not a finite "
+                         "float32)", field=names[used[col]])
+    quats = table[:, [names.index(f"rot_{i}") for i in range(4)]]
+    zero = ~(np.abs(quats) > 0).any(axis=1)
+    if zero.any():
+        raise InputError(path, f"element vertex[{int(np.argmax(zero))}] has the zero quaternion "
+                         "(rot_0..rot_3 all 0), which is no rotation", field="rot_0")
+    scales = table[:, [names.index(f"scale_{i}") for i in range(3)]]
+    big = scales > _MAX_LOG_SCALE
+    if big.any():
+        row, col = np.argwhere(big)[0]
+        raise InputError(path, f"element vertex[{row}] has log scale {scales[row, col]:g} > "
+                         f"{_MAX_LOG_SCALE:g} (its covariance overflows float32)",
+                         field=f"scale_{col}")
 
 
 def _read_header(path: Path, f) -> tuple[str, list, int]:

@@ -1,4 +1,4 @@
-"""``artgs contact-sheet``: one labelled picture of what every stage made, from one capture view.
+"""The contact sheet (``artgs contact-sheet``): one labelled picture of what every stage made, from one capture view.
 
 Panels, each present when its inputs are in OUT: a capture frame; the reconstructed splat;
 the proposed joints drawn over the splat with each part's Gaussians coloured; the object posed
@@ -10,7 +10,6 @@ OpenCV draws the lines and the labels (it is an engine dependency already).
 
 from __future__ import annotations
 
-import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +22,6 @@ from ..model.capture import load_capture
 from ..model.errors import InputError
 from ..model.joints import Joint, read_articulation
 from ..model.ply import SplatArrays, read_ply
-from ..model.progress import Progress
 from .sh import C0
 
 #: Part colours (RGB 0..1): base grey, then one colour per joint.
@@ -202,16 +200,3 @@ def write_contact_sheet(out: Path, capture_path: Path, path: Path, width: int = 
         Path(target).parent.mkdir(parents=True, exist_ok=True)
         atomic.write_bytes(target, data.tobytes())
     return found
-
-
-def contact_sheet_command(args: argparse.Namespace, progress: Progress) -> int:
-    """``artgs contact-sheet OUT [--capture C] [--output PNG] [--panels DIR] [--width W]``."""
-    out = Path(args.out)
-    capture = layout.capture_of(out, args.capture)
-    path = Path(args.output) if args.output else out / "preview.png"
-    progress.start("contact-sheet", "rendering the contact sheet")
-    found = write_contact_sheet(out, capture, path, args.width,
-                                Path(args.panels) if args.panels else None)
-    progress.finish("contact-sheet", panels=len(found))
-    progress.finished(preview=str(path), panels=[p.name for p in found])
-    return 0

@@ -41,6 +41,7 @@ from ..model.joints import Articulation, Joint, write_articulation
 from ..model.progress import QUIET, Progress
 from .objects import ObjectSpec, random_spec
 from .render import Scene, make_texture
+from .robot import RobotInScene, check_robot, plan_robot, robot_keys
 
 #: Focal length as a multiple of the image width.
 FOCAL_FACTOR = 1.1
@@ -49,7 +50,8 @@ _MAX_PER_CATEGORY = 1000
 
 def generate_object(out: str | Path, category: str, seed: int, *, width: int = 160,
                     height: int = 120, static_views: int = 24, steps: int = 6,
-                    depth_noise: float = 0.0, simultaneous: bool = False) -> Path:
+                    depth_noise: float = 0.0, simultaneous: bool = False,
+                    robot: str | None = None) -> Path:
     """Generate one object of ``category`` from ``seed`` and write its capture folder ``out``.
 
     An existing folder is replaced only if it is an earlier synthetic capture (has ``gt.json``).
@@ -59,12 +61,14 @@ def generate_object(out: str | Path, category: str, seed: int, *, width: int = 1
     _check_category(category)
     _check_seed(seed)
     _check_target(out)
+    check_robot(robot)
     spec = random_spec(category, seed)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
     try:
         os.chmod(tmp, 0o755)
-        _write_capture(tmp, spec, width, height, static_views, steps, depth_noise, simultaneous)
+        _write_capture(tmp, spec, width, height, static_views, steps, depth_noise, simultaneous,
+                       robot=robot)
         _move_into_place(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -101,16 +105,6 @@ def generate_set(out: str | Path, categories: list[str] | tuple[str, ...] | None
                         seconds=round(time.perf_counter() - t0, 2))
     progress.finish("synth", objects=len(paths))
     return paths
-
-
-def synth_command(args, progress: Progress) -> int:
-    """The ``artgs synth`` command."""
-    paths = generate_set(args.out, args.category, args.per_category, args.seed, progress,
-                         width=args.width, height=args.height, static_views=args.static_views,
-                         steps=args.steps, depth_noise=args.depth_noise,
-                         simultaneous=args.simultaneous)
-    progress.finished(captures=[str(p) for p in paths])
-    return 0
 
 
 def interaction_schedule(spec: ObjectSpec, steps: int, simultaneous: bool
@@ -193,7 +187,8 @@ def _orbit_camera(K: np.ndarray, width: int, height: int, centre: np.ndarray, az
 
 
 def _write_capture(root: Path, spec: ObjectSpec, width: int, height: int, static_views: int,
-                   steps: int, depth_noise: float, simultaneous: bool) -> None:
+                   steps: int, depth_noise: float, simultaneous: bool,
+                   robot: str | None = None) -> None:
     K = intrinsics(FOCAL_FACTOR * width, FOCAL_FACTOR * width, width / 2, height / 2)
     rng = np.random.default_rng([spec.seed, CATEGORIES.index(spec.category), 1])
     noise_rng = np.random.default_rng([spec.seed, CATEGORIES.index(spec.category), 2])
@@ -209,18 +204,22 @@ def _write_capture(root: Path, spec: ObjectSpec, width: int, height: int, static
               for t, states in enumerate(schedule) for c, cam in enumerate(fixed)]
     texture = make_texture(np.random.default_rng([spec.seed, CATEGORIES.index(spec.category), 3]))
     frames: list[dict[str, Any]] = []
+    plan = plan_robot(spec, schedule, robot) if robot else None
     with Scene(urdf) as scene:
         if texture is not None:
             scene.set_texture(texture)
+        arm = RobotInScene(scene.client, plan) if plan else None
         for stem, camera, states, extra in shots:
             if states is not None:
                 scene.set_states(states)
+            if arm is not None and extra["phase"] == "interaction":
+                extra = {**extra, "robot_joint_positions": arm.show(extra["time"])}
             # open parts stay within 3 bounding radii of the centre: the far plane never clips
             far = float(np.linalg.norm(camera.center - centre)) + 4.0 * radius
             rgb, depth, mask = scene.render(camera, 0.05, far)
             if depth_noise > 0:
                 noisy = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
-                depth = np.where(mask, np.maximum(noisy, 1e-3), 0.0).astype(np.float32)
+                depth = np.where(depth > 0, np.maximum(noisy, 1e-3), 0.0).astype(np.float32)
             _write_frame(root, stem, rgb, depth, mask)
             frames.append({"file_path": f"images/{stem}.png",
                            "depth_file_path": f"depth/{stem}.npy",
@@ -230,7 +229,8 @@ def _write_capture(root: Path, spec: ObjectSpec, width: int, height: int, static
 
     atomic.write_json(root / "transforms.json", {
         "camera_model": "PINHOLE", "fl_x": float(K[0, 0]), "fl_y": float(K[1, 1]),
-        "cx": float(K[0, 2]), "cy": float(K[1, 2]), "w": width, "h": height, "frames": frames})
+        "cx": float(K[0, 2]), "cy": float(K[1, 2]), "w": width, "h": height,
+        **(robot_keys(plan) if plan else {}), "frames": frames})
     write_articulation(root / "gt.json", _ground_truth(spec, schedule))
 
 

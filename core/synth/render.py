@@ -87,7 +87,8 @@ class Scene:
 
     def render(self, camera: Camera, near: float, far: float
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """RGB (H,W,3) uint8, z-depth (H,W) float32 metres (0 = background), mask (H,W) bool."""
+        """RGB (H,W,3) uint8, z-depth (H,W) float32 metres of every body (0 = background), mask
+        (H,W) bool of the object's body."""
         w, h = camera.width, camera.height
         _, _, rgba, zbuf, seg = p.getCameraImage(
             w, h, viewMatrix=view_matrix(camera),
@@ -97,10 +98,11 @@ class Scene:
             physicsClientId=self.client)
         rgb = np.asarray(rgba, np.uint8).reshape(h, w, 4)[:, :, :3].copy()
         zbuf = np.asarray(zbuf, np.float64).reshape(h, w)
-        mask = np.asarray(seg).reshape(h, w) == self.body
+        seg = np.asarray(seg).reshape(h, w)
+        mask = seg == self.body
         ndc = 2.0 * zbuf - 1.0
         depth = 2.0 * far * near / ((far + near) - ndc * (far - near))
-        depth = np.where(mask, depth, 0.0).astype(np.float32)
+        depth = np.where(seg >= 0, depth, 0.0).astype(np.float32)   # every body (e.g. a robot)
         return rgb, depth, mask
 
 
