@@ -150,37 +150,55 @@ def sheet(panels: list[Panel], columns: int | None = None, gap: int = 4) -> np.n
     return out
 
 
+def best_view(splats: SplatArrays, labels: np.ndarray, cameras: list[Camera],
+              width: int = 48) -> int:
+    """Index of the camera that sees most of the moving parts: the part-coloured splat is rendered
+    small from each and the coloured (saturated) pixels counted; 0 when nothing moves."""
+    if not np.any(labels > 0):
+        return 0
+    coloured = coloured_by_part(splats, labels)
+    counts = []
+    for camera in cameras:
+        img = render_splat(coloured, camera.scaled(width / camera.width)).astype(int)
+        counts.append(int(np.count_nonzero(img.max(axis=2) - img.min(axis=2) > 80)))
+    return int(np.argmax(counts))
+
+
 def panels(out: Path, capture_path: Path, width: int = 240) -> list[Panel]:
-    """The sheet's panels for OUT (those whose inputs exist), rendered ``width`` pixels wide."""
+    """The sheet's panels for OUT (those whose inputs exist), rendered ``width`` pixels wide from
+    the static view that shows the moving parts best."""
     import cv2
 
     capture = load_capture(capture_path)
     if not capture.static:
         raise InputError(Path(capture_path) / "transforms.json", "no static frame to show",
                          field="frames")
-    frame = capture.static[0]
+    splat_path, proposals = out / layout.SPLAT, out / layout.PROPOSALS
+    splats = read_ply(splat_path) if splat_path.is_file() else None
+    joints = {name: read_articulation(out / file).joints
+              for name, file in (("joints", layout.PROPOSALS), ("optimised", layout.ARTICULATION))
+              if splats is not None and (out / file).is_file()}
+    labels = {name: assign_parts(splats.means, js) for name, js in joints.items()}
+    view = best_view(splats, labels["joints"], [f.camera for f in capture.static]) \
+        if "joints" in labels and proposals.is_file() else 0
+    frame = capture.static[view]
     camera = frame.camera.scaled(width / frame.camera.width)
     size = (camera.width, camera.height)
     result = [Panel("capture", "Capture frame",
                     cv2.resize(frame.rgb, size, interpolation=cv2.INTER_AREA))]
-    splat_path = out / layout.SPLAT
-    if not splat_path.is_file():
+    if splats is None:
         return result
-    splats = read_ply(splat_path)
     result.append(Panel("splat", f"Splat ({len(splats):,} Gaussians)", render_splat(splats, camera)))
     extent = float(np.ptp(splats.means, axis=0).max()) if len(splats) else 1.0
-    for name, file, title in (("joints", layout.PROPOSALS, "Joints"),
-                              ("optimised", layout.ARTICULATION, "Optimised joints")):
-        if not (out / file).is_file():
+    for name, title in (("joints", "Joints"), ("optimised", "Optimised joints")):
+        if name not in joints:
             continue
-        joints = read_articulation(out / file).joints
-        labels = assign_parts(splats.means, joints)
-        parts = render_splat(coloured_by_part(splats, labels), camera)
-        result.append(Panel(name, f"{title} and parts ({len(joints)})",
-                            draw_joints(parts, joints, camera, 0.3 * extent)))
+        parts = render_splat(coloured_by_part(splats, labels[name]), camera)
+        result.append(Panel(name, f"{title} and parts ({len(joints[name])})",
+                            draw_joints(parts, joints[name], camera, 0.3 * extent)))
         if name == "joints":
             result.append(Panel("posed", "Posed open",
-                                render_splat(posed(splats, joints, labels), camera)))
+                                render_splat(posed(splats, joints[name], labels[name]), camera)))
     return result
 
 
