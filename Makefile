@@ -17,8 +17,10 @@ env: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/python scripts/demo.py $(DEMO_OUT)
 
+# The whole suite with bpy 4.5, then the Blender-side tests under bpy 5.x (.venv-bpy5/, Python 3.13).
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+	$(BIN)/python scripts/test_blender5.py
 
 extension: $(STAMP)
 	$(BIN)/python scripts/build_extension.py dist
