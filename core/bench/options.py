@@ -68,3 +68,20 @@ class BenchOptimiseOptions:
     basin: int = option(0, "perturbed-start runs per capture (10-30 deg, 5-15 cm) for the basin "
                         "rate")
     device: str = option("auto", "where torch work runs", choices=DEVICES)
+
+
+@dataclass
+class BenchBatchOptions:
+    """``artgs bench-batch``: captures per hour of ``artgs batch`` per worker count."""
+
+    data: str | None = option(None, "folder of capture folders (default: generate --count)")
+    count: int = option(4, "generated sets: captures (the seven categories in turn)")
+    seed: int = option(0, "generated sets: seed")
+    width: int = option(160, "generated sets: image width")
+    height: int = option(120, "generated sets: image height")
+    static_views: int = option(24, "generated sets: static views")
+    iterations: int | None = option(None, "reconstruction iteration cap (default: until converged)")
+    workers: list[int] = field(default_factory=lambda: [1, 2],
+                               metadata={"help": "worker counts to time"})
+    ray: bool = option(False, "run the batches on a private local Ray instead of the process pool")
+    device: str = option("auto", "where torch work runs", choices=DEVICES)
