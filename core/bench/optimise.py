@@ -39,7 +39,8 @@ def _scores(pred, gt) -> list[dict]:
 
 
 def perturbed(joints, rng: np.random.Generator) -> list:
-    """Copies of ``joints`` with the axis turned by 10–30° and the line moved by 5–15 cm."""
+    """Copies of ``joints`` with the axis turned by 10–30° and the line moved by 5–15 cm (their
+    states, the true ones, are kept)."""
     out = []
     for j in joints:
         j = copy.deepcopy(j)
