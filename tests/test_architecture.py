@@ -9,7 +9,8 @@ a module name and checked against these rules (README, "Repository layout"):
    render (model and geometry only); ``synth`` may import stages and what they may; ``bench``
    also synth (it generates its sets), pipeline and batch (it times them); only ``cli`` imports
    ``cli``, ``bench``, ``synth`` (and ``artgs.__main__`` imports cli). The ``artgs.core`` package
-   itself imports nothing. Every module of core/ belongs to one of these parts.
+   itself imports nothing. Every module of core/ belongs to one of these parts (a top-level
+   module of core/ is the part of its name, or the one :data:`MODULE_PARTS` gives it).
 2. ``core.model`` is numpy-only: at module level it imports only the standard library, numpy and
    model modules; inside functions only the few imports listed in :data:`MODEL_LAZY` (cv2 where
    the capture reader decodes images, model/frame_files.py; torch in the environment probe), so
@@ -55,6 +56,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     "bench": _BELOW_STAGES | {"stages", "pipeline", "batch", "synth"},
     "cli": set(CORE_PARTS) - {"cli"},
 }
+#: top-level modules of core/ that belong to a part of another name
+MODULE_PARTS = {"artgs.core.resume": "pipeline"}   # what of a run is done: the runner's helper
 BLENDER_SIDE = ("artgs_addon", "operators", "panels")
 BLENDER_APIS = {"bpy", "bpy_extras", "mathutils", "gpu", "gpu_extras", "bmesh", "addon_utils",
                 "_bpy"}
@@ -146,6 +149,8 @@ def core_part(module: str) -> str | None:
     parts = module.split(".")
     if parts[:2] != [PACKAGE, "core"]:
         return None
+    if len(parts) == 3 and module in MODULE_PARTS:
+        return MODULE_PARTS[module]
     return parts[2] if len(parts) > 2 else ""
 
 
