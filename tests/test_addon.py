@@ -319,7 +319,7 @@ def test_failing_capture_import_leaves_scene(scene, tmp_path, capture):
     assert "field 'fl_x'" in message and message in str(err.value)
     assert "Traceback" not in str(err.value)
     assert scene.artgs.capture.status == "FAILED" and _scene_state() == before
-    assert _preview_dirs() == temporary  # the temporary preview folder is gone
+    assert _preview_dirs() <= temporary  # ours is gone (others may come and go meanwhile)
 
 
 def _run(op, **kwargs) -> None:
