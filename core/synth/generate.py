@@ -40,7 +40,8 @@ from ..model.errors import InputError
 from ..model.joints import Articulation, Joint, write_articulation
 from ..model.progress import QUIET, Progress
 from .objects import ObjectSpec, random_spec
-from .render import Scene, make_texture
+from ..sim.client import Scene
+from .texture import make_texture
 
 #: Focal length as a multiple of the image width.
 FOCAL_FACTOR = 1.1
@@ -209,15 +210,18 @@ def _write_capture(root: Path, spec: ObjectSpec, width: int, height: int, static
               for t, states in enumerate(schedule) for c, cam in enumerate(fixed)]
     texture = make_texture(np.random.default_rng([spec.seed, CATEGORIES.index(spec.category), 3]))
     frames: list[dict[str, Any]] = []
-    with Scene(urdf) as scene:
+    with Scene() as scene:
+        body = scene.load(urdf)
         if texture is not None:
-            scene.set_texture(texture)
+            scene.set_texture(body, texture)
         for stem, camera, states, extra in shots:
             if states is not None:
-                scene.set_states(states)
+                scene.set_states(body, states)
             # open parts stay within 3 bounding radii of the centre: the far plane never clips
             far = float(np.linalg.norm(camera.center - centre)) + 4.0 * radius
-            rgb, depth, mask = scene.render(camera, 0.05, far)
+            frame = scene.render(camera, 0.05, far)
+            rgb, mask = frame.rgb, frame.body == body.id
+            depth = np.where(mask, frame.depth, 0.0).astype(np.float32)
             if depth_noise > 0:
                 noisy = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
                 depth = np.where(mask, np.maximum(noisy, 1e-3), 0.0).astype(np.float32)

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..model.categories import CATEGORIES
 from ..model.joints import Joint
+from ..sim import urdf
 
 Rgba = tuple[float, float, float, float]
 
@@ -79,11 +80,11 @@ class ObjectSpec:
         states = states or {}
         out = []
         for b in self.body:
-            out.append((self.base_pose @ _translation(b.center), np.array(b.half), "base"))
+            out.append((self.base_pose @ urdf.translation(b.center), np.array(b.half), "base"))
         for q, joint in zip(self.parts, self.joints()):
-            T = joint.transform(states.get(q.name, 0.0)) @ self.base_pose @ _translation(q.origin)
+            T = joint.transform(states.get(q.name, 0.0)) @ self.base_pose @ urdf.translation(q.origin)
             for b in q.boxes:
-                out.append((T @ _translation(b.center), np.array(b.half), q.child))
+                out.append((T @ urdf.translation(b.center), np.array(b.half), q.child))
         return out
 
     def corners(self) -> np.ndarray:
@@ -99,25 +100,14 @@ class ObjectSpec:
 
     def to_urdf(self) -> str:
         """URDF text: ``world`` root, fixed ``base_pose`` joint, base link, one link per part."""
-        yaw = math.atan2(self.base_pose[1, 0], self.base_pose[0, 0])
-        lines = ['<?xml version="1.0"?>', f'<robot name="{self.category}">',
-                 '  <link name="world"/>',
-                 '  <joint name="base_pose" type="fixed">',
-                 '    <parent link="world"/>\n    <child link="base"/>',
-                 f'    <origin xyz="{_v(self.base_pose[:3, 3])}" rpy="0 0 {_f(yaw)}"/>',
-                 '  </joint>']
-        lines += _link("base", self.body)
+        links = [urdf.Link("world"), _link("base", self.body)]
+        joints = [urdf.UrdfJoint("base_pose", "fixed", "world", "base", origin=self.base_pose)]
         for q in self.parts:
-            lines += [f'  <joint name="{q.name}" type="{q.type}">',
-                      f'    <parent link="base"/>\n    <child link="{q.child}"/>',
-                      f'    <origin xyz="{_v(q.origin)}" rpy="0 0 0"/>',
-                      f'    <axis xyz="{_v(q.axis)}"/>',
-                      f'    <limit lower="{_f(q.limit[0])}" upper="{_f(q.limit[1])}" '
-                      'effort="10" velocity="1"/>',
-                      '  </joint>']
-            lines += _link(q.child, q.boxes)
-        lines.append("</robot>")
-        return "\n".join(lines) + "\n"
+            links.append(_link(q.child, q.boxes))
+            joints.append(urdf.UrdfJoint(q.name, q.type, "base", q.child,
+                                         origin=urdf.translation(q.origin),
+                                         axis=tuple(float(v) for v in q.axis), limit=q.limit))
+        return urdf.write_urdf(self.category, links, joints)
 
 
 def box_distance(points: np.ndarray, boxes: list[tuple[np.ndarray, np.ndarray, str]]) -> np.ndarray:
@@ -391,34 +381,9 @@ def _hsv(h: float, s: float, v: float) -> tuple[float, float, float]:
     return [(v, t, p_), (q, v, p_), (p_, v, t), (p_, q, v), (t, p_, v), (v, p_, q)][i]
 
 
-def _translation(xyz) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = xyz
-    return T
-
-
-def _f(x: float) -> str:
-    return f"{float(x):.9g}"
-
-
-def _v(v) -> str:
-    return " ".join(_f(x) for x in v)
-
-
-def _link(name: str, boxes: list[Box]) -> list[str]:
-    lines = [f'  <link name="{name}">',
-             '    <inertial><mass value="1"/>'
-             '<inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>']
-    for k, b in enumerate(boxes):
-        size = " ".join(_f(2 * h) for h in b.half)
-        lines += ['    <visual>',
-                  f'      <origin xyz="{_v(b.center)}" rpy="0 0 0"/>',
-                  f'      <geometry><box size="{size}"/></geometry>',
-                  f'      <material name="{name}_{k}"><color rgba="{_v(b.rgba)}"/></material>',
-                  '    </visual>',
-                  '    <collision>',
-                  f'      <origin xyz="{_v(b.center)}" rpy="0 0 0"/>',
-                  f'      <geometry><box size="{size}"/></geometry>',
-                  '    </collision>']
-    lines.append("  </link>")
-    return lines
+def _link(name: str, boxes: list[Box]) -> urdf.Link:
+    """A link whose boxes are both visual and collision shapes (unit mass, nominal inertia)."""
+    shapes = [(urdf.Box(tuple(2 * h for h in b.half)), urdf.translation(b.center), b.rgba)
+              for b in boxes]
+    return urdf.Link(name, [urdf.Geometry(s, T, rgba) for s, T, rgba in shapes],
+                     [urdf.Geometry(s, T) for s, T, _ in shapes], urdf.Inertial(1.0))
