@@ -1,6 +1,7 @@
 """``artgs bench-propose``: accuracy of the motion route per category on synthetic captures.
 
-For each capture (generated with core.synth into a temporary folder, or taken from ``--data``):
+For each capture of the benchmark set (core.bench.sets: ``--set tight|realistic|partnet:DIR``,
+generated into a temporary folder, or ``--data DIR``):
 initialise the static splat from the static views (core.reconstruct.initial_splats, or optimise
 it with core.reconstruct.reconstruct for ``--iterations``), run the motion route
 (core.propose.propose) and score it against ``gt.json`` (core.metrics.match_joints).
@@ -19,11 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from ..model.capture import load_capture
-from ..model.errors import InputError
 from ..model.joints import read_articulation
 from ..geometry.metrics import match_joints
 from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
+from .sets import materialise, parse_set
 
 
 def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0
@@ -86,22 +87,17 @@ def format_table(rows: list[dict]) -> str:
 
 
 def bench_propose_command(args, progress: Progress) -> int:
-    """``artgs bench-propose [--data DIR] [--per-category N] [--seed S] [--depth-noise s]
-    [--simultaneous] [--category C ...] [--width W --height H] [--iterations N]``."""
+    """``artgs bench-propose [--set tight|realistic|partnet:DIR|data:DIR] [--per-category N]
+    [--seed S] [--depth-noise s] [--simultaneous] [--category C ...] [--width W --height H]
+    [--iterations N]``."""
+    bset = parse_set(args.set, args.data)
     with tempfile.TemporaryDirectory(prefix="artgs-bench-propose-") as tmp:
         tmp = Path(tmp)
-        if args.data:
-            data = Path(args.data)
-            captures = sorted(p.parent for p in data.glob("*/gt.json"))
-            if not captures:
-                raise InputError(data, "no capture folders with gt.json inside (make one with "
-                                 "`artgs synth`)")
-        else:
-            from ..synth.generate import generate_set
-            captures = generate_set(tmp / "data", args.category, args.per_category, args.seed,
-                                    progress, width=args.width, height=args.height,
-                                    depth_noise=args.depth_noise,
-                                    simultaneous=args.simultaneous)
+        captures = materialise(bset, tmp / "data", per_category=args.per_category,
+                               seed=args.seed, categories=args.category, progress=progress,
+                               marker="gt.json",
+                               width=args.width, height=args.height,
+                               depth_noise=args.depth_noise, simultaneous=args.simultaneous)
         progress.start("bench-propose", f"{len(captures)} captures")
         results = []
         for k, cap in enumerate(captures):
@@ -115,7 +111,8 @@ def bench_propose_command(args, progress: Progress) -> int:
     if progress.mode == "json":
         progress.finished(rows=json.dumps(rows), results=json.dumps(results))
     else:
-        print(f"depth noise {args.depth_noise} m, simultaneous {args.simultaneous}, "
-              f"splat iterations {args.iterations}, {len(captures)} captures")
+        print(f"set {bset.label}, seed {args.seed}, depth noise {args.depth_noise} m, "
+              f"simultaneous {args.simultaneous}, splat iterations {args.iterations}, "
+              f"{len(captures)} captures")
         print(format_table(rows))
     return 0

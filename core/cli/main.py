@@ -13,10 +13,13 @@ import importlib
 import os
 import signal
 import sys
+from dataclasses import fields
 from typing import Callable
 
 from ..model.errors import ArtgsError, Cancelled, InputError
 from ..model.progress import Progress
+from ..model.categories import EXTRA_KINDS
+from ..model.regime import PRESETS, Regime
 from ..render.constants import LOW_PASS
 
 CATEGORIES = ("dishwasher", "refrigerator", "oven", "microwave", "storage", "drawer", "cabinet")
@@ -47,6 +50,39 @@ def _device(p: argparse.ArgumentParser) -> None:
                    help="where torch work runs (auto: CUDA with gsplat if available, else CPU)")
 
 
+def _regime(p: argparse.ArgumentParser) -> None:
+    """--regime and one flag per core.model.regime.Regime field (default: the preset's value)."""
+    p.add_argument("--regime", choices=tuple(PRESETS), default="tight",
+                   help="capture regime preset (realistic: the benchmarks' default)")
+    for f in fields(Regime):
+        flag = "--" + f.name.replace("_", "-")
+        preset = {name: getattr(r, f.name) for name, r in PRESETS.items()}
+        help_ = f"{f.metadata['help']} (presets: " + ", ".join(
+            f"{k} {_show(v)}" for k, v in preset.items()) + ")"
+        if f.type in ("bool", bool):
+            p.add_argument(flag, dest=f.name, action=argparse.BooleanOptionalAction, default=None,
+                           help=help_)
+        elif "tuple" in str(f.type):
+            p.add_argument(flag, dest=f.name, type=float, nargs=2, metavar=("LOW", "HIGH"),
+                           default=None, help=help_)
+        else:
+            kind = {"int": int, "float": float, "str": str}[str(f.type)]
+            p.add_argument(flag, dest=f.name, type=kind, default=None, help=help_)
+
+
+def _bench_set(p: argparse.ArgumentParser) -> None:
+    """--set / --data of every benchmark command (core/bench/sets.py)."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--set", default=None, metavar="SET",
+                   help="tight | realistic | partnet:DIR (DIR/<kind>/<id>/mobility.urdf) | "
+                        "data:DIR (default tight); see core/bench/sets.py")
+    g.add_argument("--data", default=None, help="capture folders already made (= data:DIR)")
+
+
+def _show(v) -> str:
+    return "-".join(f"{x:g}" for x in v) if isinstance(v, tuple) else str(v)
+
+
 def _vlm(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vlm-endpoint", default=None,
                    help="OpenAI-compatible base URL, e.g. http://127.0.0.1:8000/v1 "
@@ -60,10 +96,25 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="artgs", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("synth", help="generate synthetic articulated objects with ground truth")
+    p = sub.add_parser("synth", help="generate synthetic articulated objects with ground truth",
+                       description="Procedural objects (--category) or articulated URDF assets "
+                                   "(--urdf), rendered under a regime (see core/model/regime.py).")
     p.add_argument("out", help="folder to write; one capture folder per object")
-    p.add_argument("--category", action="append", choices=CATEGORIES,
-                   help="category to generate (repeatable; default all seven)")
+    p.add_argument("--category", action="append", choices=CATEGORIES + EXTRA_KINDS,
+                   help="category to generate (repeatable; default all seven, plus "
+                        f"{', '.join(EXTRA_KINDS)} in regimes with variety)")
+    p.add_argument("--urdf", action="append", default=None, metavar="PATH",
+                   help="render this articulated URDF (e.g. PartNet-Mobility <kind>/<id>/"
+                        "mobility.urdf) instead of procedural objects (repeatable)")
+    p.add_argument("--kind", default=None,
+                   help="--urdf: the object's kind for its real size (default: the asset "
+                        "folder's parent folder name)")
+    p.add_argument("--joints", nargs="+", default=None, metavar="NAME",
+                   help="--urdf: the joints that open parts (default: the rule in "
+                        "core/synth/asset.py)")
+    p.add_argument("--size", type=float, default=None,
+                   help="--urdf: largest dimension in metres (default: drawn for the kind)")
+    _regime(p)
     p.add_argument("--per-category", type=int, default=1, help="objects per category")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--width", type=int, default=160)
@@ -127,20 +178,20 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p)
 
     p = sub.add_parser("bench-reconstruct", help="reconstruction quality/speed per category")
-    p.add_argument("--data", default=None, help="benchmark set from `artgs synth` (default: generate one)")
+    _bench_set(p)
     p.add_argument("--per-category", type=int, default=1)
     p.add_argument("--seed", type=int, default=0)
     _device(p)
     _common(p)
 
     p = sub.add_parser("bench-propose", help="proposal accuracy per category (motion route)")
-    p.add_argument("--data", default=None, help="benchmark set from `artgs synth` (default: generate one)")
+    _bench_set(p)
     p.add_argument("--per-category", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--depth-noise", type=float, default=0.0)
     p.add_argument("--simultaneous", action="store_true",
                    help="generated sets: the first two joints also move together")
-    p.add_argument("--category", nargs="+", choices=CATEGORIES, default=None,
+    p.add_argument("--category", nargs="+", choices=CATEGORIES + EXTRA_KINDS, default=None,
                    help="generated sets: only these categories")
     p.add_argument("--width", type=int, default=160, help="generated sets: image width")
     p.add_argument("--height", type=int, default=120, help="generated sets: image height")

@@ -63,10 +63,12 @@ class Frame:
 
 @dataclass
 class Body:
-    """A loaded URDF: PyBullet id and its movable joints by name (name -> joint index)."""
+    """A loaded URDF: PyBullet id, its movable joints by name (name -> joint index) and its links
+    by name (name -> link index, -1 = the root link)."""
 
     id: int
     joints: dict[str, int]
+    links: dict[str, int]
 
 
 class Scene:
@@ -91,11 +93,13 @@ class Scene:
         body = p.loadURDF(str(urdf_path), pos, orn, useFixedBase=fixed, flags=flags,
                           globalScaling=scale, physicsClientId=self.client)
         joints = {}
+        links = {p.getBodyInfo(body, physicsClientId=self.client)[0].decode(): -1}
         for j in range(p.getNumJoints(body, physicsClientId=self.client)):
             info = p.getJointInfo(body, j, physicsClientId=self.client)
+            links[info[12].decode()] = j
             if info[2] in MOVABLE:
                 joints[info[1].decode()] = j
-        return Body(body, joints)
+        return Body(body, joints, links)
 
     def joint_info(self, body: Body, index: int) -> tuple:
         """PyBullet's ``getJointInfo`` tuple."""
