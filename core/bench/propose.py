@@ -74,13 +74,14 @@ def summarize(results: list[dict]) -> list[dict]:
 
 
 def format_table(rows: list[dict]) -> str:
-    head = (f"{'category':<13}{'caps':>5}{'joints':>7}{'type':>7}{'AE mean':>9}{'AE max':>8}"
+    w = max([13] + [len(r["category"]) + 1 for r in rows])
+    head = (f"{'category':<{w}}{'caps':>5}{'joints':>7}{'type':>7}{'AE mean':>9}{'AE max':>8}"
             f"{'OE mean':>9}{'OE max':>8}{'s/cap':>7}")
     lines = [head, "-" * len(head)]
     for r in rows:
         def f(v: float, w: int, p: int) -> str:
             return f"{'-':>{w}}" if math.isnan(v) else f"{v:>{w}.{p}f}"
-        lines.append(f"{r['category']:<13}{r['captures']:>5}{r['joints']:>7}"
+        lines.append(f"{r['category']:<{w}}{r['captures']:>5}{r['joints']:>7}"
                      f"{100 * r['type_acc']:>6.0f}%{f(r['ae_mean'], 9, 2)}{f(r['ae_max'], 8, 2)}"
                      f"{f(r['oe_mean'], 9, 2)}{f(r['oe_max'], 8, 2)}{r['seconds']:>7.1f}")
     return "\n".join(lines)
