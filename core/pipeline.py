@@ -1,60 +1,95 @@
-"""``artgs run CAPTURE --out OUT``: every stage that exists, in order, on one capture.
+"""Running stages: one stage (:func:`run_stage`) or all of them in registry order (:func:`run`).
 
-validate -> reconstruct -> propose. Until an optimisation stage exists the proposals are also
-written as ``articulation.json`` so the whole output contract can be exercised end to end.
+Stages are declared once in :mod:`core.model.registry`; this module resolves their run functions
+lazily, refuses missing inputs before work (naming the stage that makes them), and records each
+stage's figures and time in OUT/report.json. ``artgs run`` checks every stage's options against
+the capture before the first stage starts.
 """
 
 from __future__ import annotations
 
-import argparse
+import importlib
 import time
 from pathlib import Path
+from typing import Any, Callable
 
-from .model import layout
-from .model.capture import load_capture
+from .model import layout, registry
+from .model.capture import Capture, load_capture
 from .model.joints import Articulation, read_articulation, write_articulation
 from .model.progress import Progress
+from .model.registry import StageSpec
 
 
-def run(capture_dir: Path, out: Path, progress: Progress, *, method: str = "motion",
-        iterations: int | None = None, device: str = "auto", vlm=None) -> Articulation:
-    """Run the pipeline; returns the articulation written to ``out``."""
-    from .stages.propose.stage import check_capture, propose_stage
-    from .stages.reconstruct import reconstruct_stage
+def resolve(ref: str) -> Callable[..., Any]:
+    """The function named by a registry reference ``"module:function"`` (module under core)."""
+    module, func = ref.split(":")
+    return getattr(importlib.import_module(f"{__package__}.{module}"), func)
 
-    start = time.perf_counter()
-    progress.start("validate")
-    capture = load_capture(capture_dir)
-    check_capture(capture, method, vlm)
+
+def default_options(spec: StageSpec | str) -> Any:
+    """The stage's options with every default."""
+    spec = registry.stage(spec) if isinstance(spec, str) else spec
+    return spec.options()
+
+
+def check_stage(spec: StageSpec, capture: Capture | None, options: Any) -> None:
+    """Refuse options the capture cannot serve (the stage's ``check``), before any work."""
+    if spec.check is not None and (capture is not None or not spec.needs_capture):
+        resolve(spec.check)(capture, options)
+
+
+def run_stage(spec: StageSpec | str, out: str | Path, options: Any, progress: Progress, *,
+              capture: Capture | str | Path | None = None) -> dict[str, Any]:
+    """Run one stage on OUT; returns its figures (also written to report.json).
+
+    ``capture``: a loaded capture, its folder, or None for the one recorded in OUT's report.
+    """
+    spec = registry.stage(spec) if isinstance(spec, str) else spec
+    out = Path(out)
+    for name in spec.reads:
+        registry.require(out, name)
+    loaded: Capture | None = None
+    if spec.needs_capture:
+        loaded = capture if isinstance(capture, Capture) else \
+            load_capture(layout.capture_of(out, capture))
+    check_stage(spec, loaded, options)
     out.mkdir(parents=True, exist_ok=True)
-    layout.update_report(out, capture=str(capture_dir.resolve()))
+    progress.start(spec.name, spec.title.lower())
+    figures = resolve(spec.run)(out, loaded, options, progress)
+    seconds = round(progress.finish(spec.name, **{k: v for k, v in figures.items()
+                                                   if isinstance(v, (int, float, str))}), 2)
+    figures = {**figures, "seconds": seconds}
+    if loaded is not None:
+        layout.update_report(out, capture=str(Path(loaded.root).resolve()))
+    layout.update_report(out, spec.name, **figures)
+    return figures
+
+
+def run(capture_dir: str | Path, out: str | Path, progress: Progress,
+        options: dict[str, Any] | None = None) -> Articulation:
+    """Every registered stage in order on one capture; returns the articulation in OUT.
+
+    ``options``: per stage name, its options dataclass (defaults for the others). Every stage's
+    check runs before the first stage starts. While no stage writes ``articulation.json``, the
+    proposals are written as it, marked ``"optimised": false``.
+    """
+    options = {s.name: (options or {}).get(s.name) or s.options() for s in registry.STAGES}
+    out = Path(out)
+    start = time.perf_counter()
+    progress.start("validate", "checking the capture")
+    capture = load_capture(capture_dir)
+    for spec in registry.STAGES:
+        check_stage(spec, capture, options[spec.name])
     progress.finish("validate", frames=len(capture.frames), interaction=len(capture.interaction))
 
-    reconstruct_stage(capture, out, progress, iterations=iterations, device=device)
-    proposals = propose_stage(capture, out, progress, method=method, device=device, vlm=vlm)
+    for spec in registry.STAGES:
+        run_stage(spec, out, options[spec.name], progress, capture=capture)
 
-    articulation = Articulation(proposals.joints, {**proposals.meta, "optimised": False})
-    write_articulation(out / layout.ARTICULATION, articulation)
-    layout.update_report(out, "run", seconds=time.perf_counter() - start,
+    if registry.producer_of(layout.ARTICULATION) is None:
+        proposals = read_articulation(out / layout.PROPOSALS)
+        write_articulation(out / layout.ARTICULATION,
+                           Articulation(proposals.joints, {**proposals.meta, "optimised": False}))
+    articulation = read_articulation(out / layout.ARTICULATION)
+    layout.update_report(out, "run", seconds=round(time.perf_counter() - start, 2),
                          joints=len(articulation.joints))
-    return read_articulation(out / layout.ARTICULATION)
-
-
-def run_command(args: argparse.Namespace, progress: Progress) -> int:
-    """``artgs run``."""
-    vlm = None
-    if args.method == "vlm":
-        from .stages.propose.vlm.client import vlm_config
-
-        vlm = vlm_config(args.vlm_endpoint, args.vlm_model, args.vlm_timeout)
-    out = Path(args.out)
-    articulation = run(Path(args.capture), out, progress, method=args.method,
-                       iterations=args.iterations, device=args.device, vlm=vlm)
-    progress.finished(out=str(out), joints=[j.name for j in articulation.joints],
-                      files=sorted(p.name for p in out.iterdir() if not p.name.startswith(".")))
-    if progress.mode == "text":
-        for j in articulation.joints:
-            print(f"{j.name}: {j.type} axis={j.axis.round(3).tolist()} "
-                  f"origin={j.origin.round(3).tolist()} limit={list(j.limit)}")
-        print(f"outputs in {out}")
-    return 0
+    return articulation

@@ -9,7 +9,7 @@ import pytest
 
 from artgs.core.model.capture import load_capture, summarize
 from artgs.core.model.capture_preview import KEYS, read_preview, write_preview
-from artgs.core.cli.main import main
+from artgs.core.cli import main
 from artgs.core.model.errors import InputError
 from artgs.core.synth.generate import generate_object
 

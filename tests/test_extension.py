@@ -50,7 +50,7 @@ def test_zip_contents(built, manifest):
     assert built.name == f"artgs-{manifest['version']}.zip"
     names = zipfile.ZipFile(built).namelist()
     for required in ("__init__.py", "blender_manifest.toml", "artgs_addon/__init__.py",
-                     "core/cli/main.py", "operators/_job.py", "panels/pipeline.py",
+                     "core/cli/app.py", "operators/_job.py", "panels/pipeline.py",
                      "scripts/headless_pipeline.py"):
         assert required in names, required
     assert not [n for n in names if n.startswith(("tests/", ".venv/", ".ci/", ".git/", "dist/"))

@@ -46,7 +46,7 @@ def test_json_progress_protocol_and_cancel():
 
 
 def test_cli_help_loads_no_torch_and_bad_input_exits_2(tmp_path):
-    code = ("import sys; from artgs.core.cli.main import build_parser; build_parser(); "
+    code = ("import sys; from artgs.core.cli.app import build_parser; build_parser(); "
             "print('torch' in sys.modules, 'bpy' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]

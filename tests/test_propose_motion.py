@@ -18,6 +18,7 @@ from artgs.core.model.joints import read_articulation
 from artgs.core.geometry.metrics import match_joints
 from artgs.core.model.ply import write_ply
 from artgs.core.model.progress import QUIET
+from artgs.core.model.registry import ProposeOptions
 from artgs.core.stages.propose.stage import propose
 from artgs.core.stages.propose.motion import propose_motion
 from artgs.core.stages.reconstruct import initial_splats
@@ -148,7 +149,7 @@ def test_closed_state_rendered_from_splat_without_time0_frames(data):
     out.mkdir()
     capture = load_capture(no_t0)
     write_ply(out / "splat.ply", initial_splats(capture.static)[0])
-    art = propose(capture, out, QUIET, method="motion", device="cpu")
+    art = propose(capture, out, QUIET, ProposeOptions(method="motion", device="cpu"))
     assert all(c["closed_state"] == "splat" for c in art.meta["cameras"])
     gt = read_articulation(no_t0 / "gt.json").joints
     _check(art.joints, gt, match_joints(art.joints, gt), max_ae=2.0, max_oe=2.5,

@@ -11,7 +11,7 @@ import torch
 
 from artgs.core.model import layout
 from artgs.core.model.capture import load_capture
-from artgs.core.cli.main import main
+from artgs.core.cli import main
 from artgs.core.model.errors import Cancelled, InputError
 from artgs.core.model.ply import read_ply
 from artgs.core.model.progress import QUIET, Progress

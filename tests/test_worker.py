@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from artgs.artgs_addon.worker import CANCELLED, Worker, parse_line, worker_command
+from artgs.core.cli import check_env
 from artgs.core.model import envcheck
 from artgs.core.model.progress import Progress
 
@@ -124,7 +125,7 @@ def test_cancel_after_the_end_keeps_the_outcome(tmp_path):
 
 
 def test_check_env_reports_versions_and_missing(monkeypatch, capsys):
-    assert envcheck.check_env_command(None, Progress("json")) == 0
+    assert check_env.run(None, Progress("json")) == 0
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     outputs = lines[-1]["outputs"]
     assert lines[-1]["event"] == "finished" and outputs["missing"] == []
@@ -134,7 +135,7 @@ def test_check_env_reports_versions_and_missing(monkeypatch, capsys):
     assert outputs["artgs"] == envcheck.package_version()
 
     monkeypatch.setitem(envcheck.DEPENDENCIES, "artgs_no_such_module", "no-such-dist")
-    assert envcheck.check_env_command(None, Progress("json")) == 1
+    assert check_env.run(None, Progress("json")) == 1
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert lines[-1]["event"] == "error"
     assert "artgs_no_such_module" in lines[-1]["message"] and "pip install" in lines[-1]["message"]

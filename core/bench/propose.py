@@ -24,6 +24,8 @@ from ..model.joints import read_articulation
 from ..geometry.metrics import match_joints
 from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
+from ..model.registry import ProposeOptions
+from .options import BenchProposeOptions
 from .sets import materialise, parse_set
 
 
@@ -45,7 +47,7 @@ def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iteration
     else:
         write_ply(out / "splat.ply", initial_splats(capture.static)[0])
     t0 = time.perf_counter()
-    art = propose(capture, out, QUIET, method="motion", device=device)
+    art = propose(capture, out, QUIET, ProposeOptions(method="motion", device=device))
     seconds = time.perf_counter() - t0
     scores = match_joints(art.joints, gt.joints)
     return {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name),
@@ -87,7 +89,7 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def bench_propose_command(args, progress: Progress) -> int:
+def bench_propose(args: BenchProposeOptions, progress: Progress) -> int:
     """``artgs bench-propose [--set tight|realistic|partnet:DIR|data:DIR] [--per-category N]
     [--seed S] [--depth-noise s] [--simultaneous] [--category C ...] [--width W --height H]
     [--iterations N]``."""

@@ -20,6 +20,7 @@ import numpy as np
 from ..model.capture import load_capture
 from ..model.progress import Progress
 from ..stages.reconstruct import ReconstructConfig, reconstruct
+from .options import BenchReconstructOptions
 from .sets import Column, category_of, category_table, materialise, parse_set
 
 HOLDOUT = 4
@@ -63,7 +64,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def bench_reconstruct_command(args, progress: Progress) -> int:
+def bench_reconstruct(args: BenchReconstructOptions, progress: Progress) -> int:
     """``artgs bench-reconstruct [--set tight|realistic|partnet:DIR | --data DIR]
     [--per-category N] [--seed S] [--device D]``."""
     bset = parse_set(args.set, args.data)

@@ -24,6 +24,7 @@ from ..render.cpu import blend_kernels as rk
 from ..render.cpu.project import project
 from ..render.rasterize import rasterize
 from ..render.sh import rgb_to_sh0
+from .options import BenchRenderOptions
 
 THREADS = 2
 AUTOGRAD_BUDGET_BYTES = 3e9  # the reference's fwd+bwd is skipped above this estimate
@@ -132,7 +133,7 @@ def bench_one(size: int, n: int, backend: str, runs: int, grad: bool, low_pass: 
     return _time(step, runs)
 
 
-def bench_render_command(args, progress) -> int:
+def bench_render(args: BenchRenderOptions, progress) -> int:
     """Print forward / forward+backward timings of the CPU kernels and the reference."""
     torch.set_num_threads(THREADS)
     numba.set_num_threads(min(THREADS, numba.config.NUMBA_NUM_THREADS))

@@ -1,5 +1,5 @@
 """The ``artgs`` command line: argparse only, one small module per command (``main`` is the entry)."""
 
-from .main import main
+from .app import main
 
 __all__ = ["main"]

@@ -21,7 +21,6 @@ import numpy as np
 from .atomic import atomic_path
 from .capture import Capture, load_capture, summarize
 from .errors import InputError
-from .progress import Progress
 from .sampling import subsample
 
 #: Arrays a preview file must hold (a file without one was written by another engine version).
@@ -115,19 +114,3 @@ def read_preview(path: str | Path) -> CapturePreview:
     arrays["points_total"] = int(arrays["points_total"])
     arrays["summary"] = json.loads(str(arrays["summary"]))
     return CapturePreview(**arrays)
-
-
-def capture_preview_command(args, progress: Progress) -> int:
-    """``artgs capture-preview CAPTURE --preview FILE [--max-points N]``."""
-    if args.max_points < 1:
-        raise InputError("--max-points", f"must be at least 1, not {args.max_points}")
-    progress.start("capture", "reading the capture")
-    capture = load_capture(args.capture)
-    progress.update("capture", 0.7, f"{len(capture.frames)} frames read; sampling points")
-    preview = write_preview(capture, args.preview, args.max_points)
-    kept = len(preview.points)
-    progress.finish("capture", cameras=len(capture.frames), points=kept,
-                    points_total=preview.points_total)
-    progress.finished(preview=str(Path(args.preview)), points=kept,
-                      points_total=preview.points_total, **preview.summary)
-    return 0

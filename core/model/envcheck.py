@@ -7,7 +7,6 @@ gsplat, and exits 1 with the list of what is missing.
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import importlib.metadata
 import platform
@@ -16,7 +15,6 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from .progress import Progress
 
 #: import name -> distribution name (for the version and the install hint).
 DEPENDENCIES = {
@@ -90,19 +88,3 @@ def missing_message(report: dict[str, Any]) -> str:
     dists = " ".join(DEPENDENCIES[n] for n in report["missing"])
     return (f"missing in {report['python']}: {', '.join(report['missing'])} "
             f"(install with: {report['python']} -m pip install {dists})")
-
-
-def check_env_command(args: argparse.Namespace, progress: Progress) -> int:  # noqa: ARG001
-    """``artgs check-env``: report the environment; exit 1 if a dependency is missing."""
-    report = check_environment()
-    for name, version in report["versions"].items():
-        if version is None:
-            progress.log(f"{name}: MISSING ({report['problems'][name]})", "warning")
-        else:
-            progress.log(f"{name} {version}")
-    progress.log(f"device: {report['cuda_note']}; gsplat: {'yes' if report['gsplat'] else 'no'}")
-    progress.finished(**report)
-    if report["missing"]:
-        progress.error(missing_message(report))
-        return 1
-    return 0

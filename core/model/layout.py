@@ -46,11 +46,3 @@ def capture_of(out: str | Path, capture: str | Path | None) -> Path:
         raise InputError(Path(out) / REPORT, "no capture recorded for this output folder; "
                          "pass --capture CAPTURE", field="capture")
     return Path(recorded)
-
-
-def require(out: str | Path, name: str, made_by: str) -> Path:
-    """Path of an input file in OUT, or a clear error naming the stage that makes it."""
-    path = Path(out) / name
-    if not path.is_file():
-        raise InputError(path, f"not found; run `artgs {made_by}` first")
-    return path

@@ -27,41 +27,38 @@ preset's value below (``x`` = the distance at which the object's bounding sphere
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
-from ..model.errors import InputError
-
-
-def _opt(default: Any, help: str) -> Any:
-    return field(default=default, metadata={"help": help})
+from .errors import InputError
+from .registry import option
 
 
 @dataclass(frozen=True)
 class Regime:
     """How one capture is drawn; ranges are (low, high), sampled uniformly per capture or frame."""
 
-    static_distance: tuple[float, float] | None = _opt(
-        None, "static view distance range, x framing distance (none: fit the object to 60-85 %% of "
+    static_distance: tuple[float, float] | None = option(
+        None, "static view distance range, x framing distance (none: fit the object to 60-85 % of "
               "the image)")
-    interaction_distance: tuple[float, float] | None = _opt(
-        None, "fixed interaction camera distance range, x framing distance (none: fit 70-85 %%)")
-    azimuth: float = _opt(0.0, "interaction cameras: azimuth anywhere within +-this many degrees "
+    interaction_distance: tuple[float, float] | None = option(
+        None, "fixed interaction camera distance range, x framing distance (none: fit 70-85 %)")
+    azimuth: float = option(0.0, "interaction cameras: azimuth anywhere within +-this many degrees "
                                "of the front (0: left-front and right-front, 30-45 deg)")
-    depth_sigma: tuple[float, float] = _opt(
+    depth_sigma: tuple[float, float] = option(
         (0.0, 0.0), "depth noise sigma = A z + B z^2: A (relative) and B (1/m) upper bounds; "
                     "per capture drawn from [0.4, 1] x these")
-    depth_quantum: float = _opt(0.0, "depth quantisation step, metres (0: none)")
-    depth_dropout: bool = _opt(False, "missing depth on depth edges, dark and grazing surfaces; "
+    depth_quantum: float = option(0.0, "depth quantisation step, metres (0: none)")
+    depth_dropout: bool = option(False, "missing depth on depth edges, dark and grazing surfaces; "
                                       "flying pixels at silhouettes")
-    exposure: tuple[float, float] = _opt((1.0, 1.0), "per-frame exposure gain range")
-    mask_jitter: int = _opt(0, "masks eroded or dilated by up to this many pixels per frame")
-    masks: bool = _opt(True, "write masks (--no-masks: none, as phone/RGB-D apps deliver)")
-    variety: bool = _opt(False, "appearance/geometry variety and extra kinds of objects")
-    sequence: str = _opt("sequential", "interaction sequence: sequential (each joint fully "
+    exposure: tuple[float, float] = option((1.0, 1.0), "per-frame exposure gain range")
+    mask_jitter: int = option(0, "masks eroded or dilated by up to this many pixels per frame")
+    masks: bool = option(True, "write masks (--no-masks: none, as phone/RGB-D apps deliver)")
+    variety: bool = option(False, "appearance/geometry variety and extra kinds of objects")
+    sequence: str = option("sequential", "interaction sequence: sequential (each joint fully "
                                        "open in turn) or mixed (full/partial/small openings, "
                                        "then several joints at once)")
-    room: bool = _opt(False, "textured floor, walls and furniture around the object")
+    room: bool = option(False, "textured floor, walls and furniture around the object")
 
 
 PRESETS: dict[str, Regime] = {

@@ -36,12 +36,13 @@ import torch
 
 from ..model import layout
 from ..train.adam import Adam
-from ..model.capture import Capture, Frame, load_capture
+from ..model.capture import Capture, Frame
 from ..train.densify import DensifyConfig, Densifier
 from ..render.device import resolve_device
 from ..model.errors import InputError
 from ..model.ply import SplatArrays, write_ply
 from ..model.progress import Progress
+from ..model.registry import ReconstructOptions
 from ..render.rasterize import rasterize
 from ..render.sh import rgb_to_sh0
 from ..train.ssim import ssim
@@ -302,15 +303,8 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
     evaluated. Returns the figures (also the ones recorded in report.json).
     """
     cfg = config or ReconstructConfig()
+    check(capture, ReconstructOptions(iterations=iterations, holdout=holdout, device=device))
     static = capture.static
-    if not static:
-        raise InputError(capture.root, "no static frames to reconstruct from", field="phase")
-    if holdout < 0 or holdout > len(static) - 1:
-        raise InputError(capture.root, f"holdout must be 0..{len(static) - 1} "
-                         f"(there are {len(static)} static views), not {holdout}", field="holdout")
-    if iterations is not None and iterations < 1:
-        raise InputError(capture.root, f"iterations must be positive, not {iterations}",
-                         field="iterations")
     t0 = time.perf_counter()
     dev = resolve_device(device)
     torch.manual_seed(cfg.seed)
@@ -362,27 +356,22 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
     return figures
 
 
-def reconstruct_command(args, progress: Progress) -> int:
-    """``artgs reconstruct OUT [--capture C] [--iterations N] [--holdout K] [--device D]``."""
-    out = Path(args.out)
-    capture_path = layout.capture_of(out, args.capture)
-    capture = load_capture(capture_path)
-    if args.holdout < 0 or args.holdout > len(capture.static) - 1:
-        raise InputError(capture_path, f"--holdout must be 0..{len(capture.static) - 1}, "
-                         f"not {args.holdout}", field="holdout")
-    layout.update_report(out, capture=str(Path(capture_path).resolve()))
-    reconstruct_stage(capture, out, progress, iterations=args.iterations, holdout=args.holdout,
-                      device=args.device)
-    progress.finished(splat=str(out / layout.SPLAT))
-    return 0
+def check(capture: Capture, options: ReconstructOptions) -> None:
+    """Refuse options the capture cannot serve, before any work."""
+    static = capture.static
+    if not static:
+        raise InputError(capture.root, "no static frames to reconstruct from", field="phase")
+    if options.holdout < 0 or options.holdout > len(static) - 1:
+        raise InputError(capture.root, f"--holdout must be 0..{len(static) - 1} "
+                         f"(there are {len(static)} static views), not {options.holdout}",
+                         field="holdout")
+    if options.iterations is not None and options.iterations < 1:
+        raise InputError(capture.root, f"--iterations must be positive, not {options.iterations}",
+                         field="iterations")
 
 
-def reconstruct_stage(capture: Capture, out: str | Path, progress: Progress,
-                      **options: Any) -> dict[str, Any]:
-    """:func:`reconstruct` as a pipeline stage: progress start/finish and its report.json entry."""
-    progress.start(STAGE, "optimising the static splat")
-    figures = reconstruct(capture, out, progress, **options)
-    seconds = progress.finish(STAGE, **{k: v for k, v in figures.items()
-                                        if isinstance(v, (int, float, str))})
-    layout.update_report(out, STAGE, **{**figures, "seconds": round(seconds, 2)})
-    return figures
+def run(out: Path, capture: Capture, options: ReconstructOptions,
+        progress: Progress) -> dict[str, Any]:
+    """The reconstruct stage (registry entry): OUT/splat.ply and its figures."""
+    return reconstruct(capture, out, progress, iterations=options.iterations,
+                       holdout=options.holdout, device=options.device)

@@ -34,7 +34,6 @@ import os
 import shutil
 import tempfile
 import time
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -166,22 +165,6 @@ def generate_assets(out: str | Path, urdfs: list[Path], seed: int, progress: Pro
                         seconds=round(time.perf_counter() - t0, 2))
     progress.finish("synth", objects=len(paths))
     return paths
-
-
-def synth_command(args, progress: Progress) -> int:
-    """The ``artgs synth`` command."""
-    reg = make_regime(args.regime, **{f.name: getattr(args, f.name, None) for f in fields(Regime)})
-    opts = dict(width=args.width, height=args.height, static_views=args.static_views,
-                steps=args.steps, depth_noise=args.depth_noise, simultaneous=args.simultaneous,
-                regime=reg)
-    if args.urdf:
-        paths = generate_assets(args.out, [Path(u) for u in args.urdf], args.seed, progress,
-                                kind=args.kind, joints=args.joints, size=args.size, **opts)
-    else:
-        paths = generate_set(args.out, args.category, args.per_category, args.seed, progress,
-                             **opts)
-    progress.finished(captures=[str(p) for p in paths])
-    return 0
 
 
 def interaction_schedule(joints: list[Joint], steps: int, simultaneous: bool,

@@ -2,43 +2,33 @@
 
 Reads OUT/splat.ply (from ``artgs reconstruct``) and the capture; writes OUT/proposals.json
 atomically (articulation.json schema plus per-joint ``source``, ``confidence``, ``bbox``,
-``handle``, ``extent``; top-level ``source`` = the method and the route's ``meta``) and records
-the stage in OUT/report.json. Bad input is refused before any work; on failure nothing in OUT
+``handle``, ``extent``; top-level ``source`` = the method and the route's ``meta``). Bad input is refused before any work; on failure nothing in OUT
 is touched.
 """
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ...model import layout
-from ...model.capture import TRANSFORMS, Capture, load_capture
+from ...model.capture import TRANSFORMS, Capture
 from ...model.errors import InputError
 from ...model.joints import Articulation, write_articulation
 from ...model.ply import read_ply
 from ...model.progress import Progress
-
-STAGE = "propose"
-METHODS = ("motion", "vlm")
+from ...model.registry import METHODS, ProposeOptions, require
 
 
-def check_inputs(capture: Capture, out: str | Path, method: str, vlm: Any) -> Path:
-    """Refuse unusable input before any work; returns the splat's path."""
-    check_capture(capture, method, vlm)
-    return layout.require(out, layout.SPLAT, "reconstruct")
-
-
-def check_capture(capture: Capture, method: str, vlm: Any) -> None:
-    """Refuse a method the capture or the configuration cannot serve (before reconstruction)."""
+def check(capture: Capture, options: ProposeOptions) -> None:
+    """Refuse a method the capture or the configuration cannot serve (before any work)."""
+    method = options.method
     if method not in METHODS:
         raise InputError("--method", f"must be one of {METHODS}, not {method!r}")
-    if method == "vlm" and vlm is None:
-        from .vlm.client import vlm_config
-        vlm_config()   # raises, naming $ARTGS_VLM_ENDPOINT / $ARTGS_VLM_MODEL
+    if method == "vlm":
+        vlm_of(options)   # raises, naming $ARTGS_VLM_ENDPOINT / $ARTGS_VLM_MODEL
     if method == "motion":
         tj = Path(capture.root) / TRANSFORMS
         frames = [f for f in capture.interaction if f.depth is not None and f.time is not None]
@@ -55,45 +45,47 @@ def check_capture(capture: Capture, method: str, vlm: Any) -> None:
                              frame=missing[0].index, field="depth_file_path")
 
 
-def propose(capture: Capture, out: str | Path, progress: Progress, *, method: str = "motion",
-            device: str = "auto", vlm: Any = None) -> Articulation:
-    """Propose joints for ``capture`` with ``method`` and write OUT/proposals.json.
+def vlm_of(options: ProposeOptions) -> Any:
+    """The VLM configuration of ``options`` (environment variables fill what is not given)."""
+    from .vlm.client import vlm_config
+    return vlm_config(options.vlm_endpoint, options.vlm_model, options.vlm_timeout)
 
-    ``vlm``: a ``core.vlm_client.VlmConfig`` (method ``vlm``; default from the environment).
-    """
+
+def propose(capture: Capture, out: str | Path, progress: Progress,
+            options: ProposeOptions | None = None) -> Articulation:
+    """Propose joints for ``capture`` and write OUT/proposals.json (refuses bad input first)."""
+    options = options or ProposeOptions()
     out = Path(out)
-    splat_path = check_inputs(capture, out, method, vlm)
-    arrays = read_ply(splat_path)
-    t0 = time.perf_counter()
-    if method == "motion":
+    check(capture, options)
+    arrays = read_ply(require(out, layout.SPLAT))
+    if options.method == "motion":
         from .motion import propose_motion
         opacity = 1.0 / (1.0 + np.exp(-np.asarray(arrays.opacity_logits, float)))
         joints, meta = propose_motion(capture, arrays.means, opacity,
-                                      lambda camera: _render_depth(arrays, camera, device),
+                                      lambda camera: _render_depth(arrays, camera, options.device),
                                       progress)
     else:
         from ...render.gaussians import Gaussians
         from .vlm.propose import propose_vlm
-        from .vlm.client import vlm_config
         joints, meta = propose_vlm(capture, Gaussians.from_arrays(arrays), progress,
-                                   vlm or vlm_config(), device)
+                                   vlm_of(options), options.device)
     if not joints:
-        progress.log(f"no joints found by the {method} route", level="warning")
-    articulation = Articulation(joints, {"source": method, **meta})
+        progress.log(f"no joints found by the {options.method} route", level="warning")
+    articulation = Articulation(joints, {"source": options.method, **meta})
     write_articulation(out / layout.PROPOSALS, articulation)
-    layout.update_report(out, STAGE, seconds=round(time.perf_counter() - t0, 2),
-                         joints=len(joints), method=method,
-                         types=[j.type for j in joints])
+    for j in joints:
+        unit = "rad" if j.type == "revolute" else "m"
+        progress.log(f"{j.name}: {j.type} axis {np.round(j.axis, 3).tolist()} origin "
+                     f"{np.round(j.origin, 3).tolist()} limit [{j.limit[0]:.3f}, {j.limit[1]:.3f}] "
+                     f"{unit} confidence {j.confidence}")
     return articulation
 
 
-def propose_stage(capture: Capture, out: str | Path, progress: Progress, *, method: str = "motion",
-                  device: str = "auto", vlm=None) -> Articulation:
-    """:func:`propose` as a pipeline stage, between progress start and finish."""
-    progress.start(STAGE, f"proposing joints ({method})")
-    articulation = propose(capture, out, progress, method=method, device=device, vlm=vlm)
-    progress.finish(STAGE, joints=len(articulation.joints))
-    return articulation
+def run(out: Path, capture: Capture, options: ProposeOptions, progress: Progress) -> dict[str, Any]:
+    """The propose stage (registry entry): OUT/proposals.json and its figures."""
+    articulation = propose(capture, out, progress, options)
+    return {"joints": len(articulation.joints), "method": options.method,
+            "types": [j.type for j in articulation.joints]}
 
 
 def _render_depth(arrays, camera, device: str) -> np.ndarray:
@@ -108,27 +100,3 @@ def _render_depth(arrays, camera, device: str) -> np.ndarray:
         res = render(g, camera)
     depth = res.depth.cpu().numpy()
     return np.where(res.alpha.cpu().numpy() > 0.5, depth, 0.0)
-
-
-def propose_command(args, progress: Progress) -> int:
-    """``artgs propose OUT [--capture C] [--method motion|vlm] [--device D] [--vlm-...]``."""
-    out = Path(args.out)
-    vlm = None
-    if args.method == "vlm":
-        from .vlm.client import vlm_config
-        vlm = vlm_config(args.vlm_endpoint, args.vlm_model, args.vlm_timeout)
-    layout.require(out, layout.SPLAT, "reconstruct")
-    capture_path = layout.capture_of(out, args.capture)
-    capture = load_capture(capture_path)
-    check_inputs(capture, out, args.method, vlm)
-    articulation = propose_stage(capture, out, progress, method=args.method, device=args.device,
-                                 vlm=vlm)
-    if args.capture is not None:
-        layout.update_report(out, capture=str(Path(capture_path).resolve()))
-    for j in articulation.joints:
-        unit = "rad" if j.type == "revolute" else "m"
-        progress.log(f"{j.name}: {j.type} axis {np.round(j.axis, 3).tolist()} origin "
-                     f"{np.round(j.origin, 3).tolist()} limit [{j.limit[0]:.3f}, {j.limit[1]:.3f}] "
-                     f"{unit} confidence {j.confidence}")
-    progress.finished(proposals=str(out / layout.PROPOSALS))
-    return 0

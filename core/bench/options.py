@@ -1,0 +1,58 @@
+"""Options of the benchmark commands (plain dataclasses: the CLI derives its flags from them)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..model.categories import CATEGORIES, EXTRA_KINDS
+from ..model.registry import DEVICES, option
+from ..render.constants import LOW_PASS
+
+
+#: Help of every benchmark's ``--set`` (core/bench/sets.py defines the sets).
+SET_HELP = ("benchmark set: tight | realistic | partnet:DIR (DIR/<kind>/<id>/mobility.urdf) | "
+            "data:DIR (default tight); see core/bench/sets.py")
+
+
+@dataclass
+class BenchRenderOptions:
+    """``artgs bench-render``: rasterizer speed."""
+
+    sizes: list[int] = field(default_factory=lambda: [128, 256],
+                             metadata={"help": "image sizes (square)"})
+    counts: list[int] = field(default_factory=lambda: [20000, 50000],
+                              metadata={"help": "Gaussian counts"})
+    runs: int = option(15, "timed runs per case")
+    no_reference: bool = option(False, "skip the slow pure-torch reference")
+    low_pass: float = option(LOW_PASS, f"2D dilation in px^2 (default: the project's {LOW_PASS}; "
+                             "0.3 = original 3DGS)")
+
+
+@dataclass
+class BenchReconstructOptions:
+    """``artgs bench-reconstruct``: reconstruction quality and speed per category."""
+
+    set: str | None = option(None, SET_HELP)
+    data: str | None = option(None, "capture folders already made (= --set data:DIR)")
+    per_category: int = option(1, "objects per category (generated sets)")
+    seed: int = option(0, "seed of the generated set")
+    device: str = option("auto", "where torch work runs", choices=DEVICES)
+
+
+@dataclass
+class BenchProposeOptions:
+    """``artgs bench-propose``: proposal accuracy per category (motion route)."""
+
+    set: str | None = option(None, SET_HELP)
+    data: str | None = option(None, "capture folders already made (= --set data:DIR)")
+    per_category: int = option(2, "objects per category (generated sets)")
+    seed: int = option(0, "seed of the generated set")
+    depth_noise: float = option(0.0, "generated sets: depth noise std-dev, metres")
+    simultaneous: bool = option(False, "generated sets: the first two joints also move together")
+    category: list[str] | None = option(None, "generated sets: only these categories",
+                                        choices=CATEGORIES + EXTRA_KINDS)
+    width: int = option(160, "generated sets: image width")
+    height: int = option(120, "generated sets: image height")
+    iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
+                             "depth-initialised splat)")
+    device: str = option("auto", "where torch work runs", choices=DEVICES)

@@ -1,0 +1,45 @@
+"""``artgs bench-*``: the benchmark commands, each an options dataclass and a function."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+
+from ..bench import options as bench_options
+from ..model.progress import Progress
+from .options import add_options, build
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    """A benchmark command: its options and its function (``"module:function"`` under core)."""
+
+    name: str
+    help: str
+    options: type
+    run: str
+
+
+BENCHMARKS = (
+    Benchmark("bench-render", "rasterizer speed benchmark", bench_options.BenchRenderOptions,
+              "bench.render:bench_render"),
+    Benchmark("bench-reconstruct", "reconstruction quality/speed per category",
+              bench_options.BenchReconstructOptions, "bench.reconstruct:bench_reconstruct"),
+    Benchmark("bench-propose", "proposal accuracy per category (motion route)",
+              bench_options.BenchProposeOptions, "bench.propose:bench_propose"),
+)
+
+
+def add_parsers(sub: argparse._SubParsersAction, common) -> None:
+    """One sub-command per benchmark."""
+    for b in BENCHMARKS:
+        p = sub.add_parser(b.name, help=b.help)
+        add_options(p, b.options)
+        common(p)
+        p.set_defaults(handler=lambda args, progress, b=b: _run(b, args, progress))
+
+
+def _run(b: Benchmark, args: argparse.Namespace, progress: Progress) -> int:
+    from ..pipeline import resolve
+
+    return resolve(b.run)(build(b.options, args), progress)

@@ -1,0 +1,119 @@
+"""The stage registry: the one place a pipeline stage is declared.
+
+Each :class:`StageSpec` names a stage (the CLI sub-command, its ``report.json`` key and the
+add-on's stage id), the files it reads and writes in OUT, the dataclass of its user-facing
+options, and its run function as a ``"module:function"`` string under ``core`` (imported only when
+the stage runs, so this module stays numpy-only and safe in Blender's process). ``artgs <stage>``,
+``artgs run`` (the stages in this order), the add-on's stage list and the report all derive from
+:data:`STAGES`.
+
+A run function has the signature ``run(out: Path, capture: Capture | None, options, progress)
+-> dict`` and returns JSON-able figures; :func:`core.pipeline.run_stage` does the rest (progress
+start and finish, timing, the report entry, refusing missing inputs). A ``check`` function,
+``check(capture, options)``, refuses unusable input before any stage of a run starts.
+
+Option fields carry ``metadata``: ``help``; ``choices``; ``positional``; ``shared`` (one flag for
+all stages in ``artgs run``, e.g. ``--device``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from . import layout
+from .errors import InputError
+
+DEVICES = ("auto", "cpu", "cuda")
+METHODS = ("motion", "vlm")
+
+
+def option(default: Any, help: str, **meta: Any) -> Any:  # noqa: A002 - argparse's word
+    """A dataclass field with its command-line help (and ``choices``, ``shared``, …)."""
+    return field(default=default, metadata={"help": help, **meta})
+
+
+def _device() -> Any:
+    return option("auto", "where torch work runs (auto: CUDA with gsplat if available, else CPU)",
+                  choices=DEVICES, shared=True)
+
+
+@dataclass
+class ReconstructOptions:
+    """Options of ``artgs reconstruct``."""
+
+    iterations: int | None = option(None, "iteration cap (default: until converged)")
+    holdout: int = option(0, "static views held out for evaluation")
+    device: str = _device()
+
+
+@dataclass
+class ProposeOptions:
+    """Options of ``artgs propose``."""
+
+    method: str = option("motion", "how joints are proposed", choices=METHODS)
+    device: str = _device()
+    vlm_endpoint: str | None = option(None, "OpenAI-compatible base URL, e.g. "
+                                      "http://127.0.0.1:8000/v1 (default: $ARTGS_VLM_ENDPOINT)",
+                                      shared=True)
+    vlm_model: str | None = option(None, "model name (default: $ARTGS_VLM_MODEL)", shared=True)
+    vlm_timeout: float = option(60.0, "seconds per request", shared=True)
+
+
+@dataclass(frozen=True)
+class StageSpec:
+    """One pipeline stage (see the module docstring)."""
+
+    name: str
+    title: str
+    help: str
+    reads: tuple[str, ...]
+    writes: tuple[str, ...]
+    options: type
+    run: str
+    check: str | None = None
+    needs_capture: bool = True
+
+
+STAGES: tuple[StageSpec, ...] = (
+    StageSpec("reconstruct", "Splat", "static Gaussian splat -> OUT/splat.ply",
+              reads=(), writes=(layout.SPLAT,), options=ReconstructOptions,
+              run="stages.reconstruct:run", check="stages.reconstruct:check"),
+    StageSpec("propose", "Bones", "initial joints -> OUT/proposals.json",
+              reads=(layout.SPLAT,), writes=(layout.PROPOSALS,), options=ProposeOptions,
+              run="stages.propose.stage:run", check="stages.propose.stage:check"),
+)
+
+
+def stage(name: str) -> StageSpec:
+    """The stage called ``name``."""
+    for s in STAGES:
+        if s.name == name:
+            return s
+    raise KeyError(f"no stage {name!r}; stages: {', '.join(names())}")
+
+
+def names() -> list[str]:
+    """Stage names in pipeline order."""
+    return [s.name for s in STAGES]
+
+
+def producer_of(filename: str) -> StageSpec | None:
+    """The stage that writes ``filename`` in OUT (None for files no stage writes)."""
+    return next((s for s in STAGES if filename in s.writes), None)
+
+
+def require(out: str | Path, filename: str) -> Path:
+    """Path of an input file in OUT, or a clear error naming the stage that makes it."""
+    path = Path(out) / filename
+    if not path.is_file():
+        maker = producer_of(filename)
+        hint = f"; run `artgs {maker.name}` first" if maker else ""
+        raise InputError(path, f"not found{hint}")
+    return path
+
+
+def option_names(options: type) -> list[str]:
+    """Field names of an options dataclass."""
+    return [f.name for f in fields(options)]
