@@ -303,3 +303,18 @@ def test_bench_sets_and_table(tmp_path):
     oven = next(line for line in table.splitlines() if line.startswith("oven"))
     assert oven.split()[-2:] == ["2.00", "3.00"]
     assert table.splitlines()[-1].startswith("overall")
+
+
+def test_command_line_urdf_and_sets(asset, tmp_path, capsys):
+    """`artgs synth --urdf` with regime flags writes <kind>_<id>/; a bad --set exits 2."""
+    from artgs.core.cli import main
+
+    out = tmp_path / "set"
+    argv = ["synth", str(out), "--urdf", str(asset), "--regime", "realistic", "--no-room",
+            "--mask-jitter", "1", "--width", "48", "--height", "32", "--static-views", "2",
+            "--steps", "1", "--quiet"]
+    assert main(argv) == 0
+    gt = read_articulation(out / "cabinet_4711" / "gt.json")
+    assert gt.meta["regime"]["room"] is False and gt.meta["regime"]["mask_jitter"] == 1
+    assert main(["bench-propose", "--set", "nope", "--quiet"]) == 2
+    assert main(["bench-reconstruct", "--set", f"partnet:{tmp_path / 'none'}", "--quiet"]) == 2
