@@ -327,6 +327,25 @@ def test_bad_robot_joint_positions(cap):
     refused(cap, "transforms.json", 3, "robot_joint_positions")
 
 
+@pytest.mark.parametrize("robot,bad", [("franka_panda", [0.0] * 9), ("xarm6", [0.0] * 5),
+                                       ("franka_panda", [0.0] * 6 + [float("nan"), 0.0])])
+def test_robot_joint_positions_checked_against_the_robot(cap, robot, bad):
+    """A known robot's vectors need its length (arm-only or with gripper) and finite values."""
+    good = [0.1] * 7
+    edit(cap, lambda m: (m.update(robot=robot), m["frames"][3].update(robot_joint_positions=good),
+                         m["frames"][4].update(robot_joint_positions=bad)))
+    refused(cap, "transforms.json", 4, "robot_joint_positions")
+    edit(cap, lambda m: m["frames"][4].update(robot_joint_positions=good))
+    assert load_capture(cap).frames[4].robot_joint_positions == pytest.approx(good)
+
+
+def test_robot_base_pose(cap):
+    edit(cap, lambda m: m.update(robot_base_pose=(2 * np.eye(4)).tolist()))
+    refused(cap, "transforms.json", None, "robot_base_pose")
+    edit(cap, lambda m: m.update(robot_base_pose=pose(1).tolist()))
+    np.testing.assert_allclose(load_capture(cap).robot_base_pose, pose(1))
+
+
 def test_frame_not_object(cap):
     edit(cap, lambda m: m["frames"].append("images/0000.png"))
     refused(cap, "transforms.json", 5, "frames")
@@ -354,9 +373,9 @@ def test_loading_writes_nothing(cap):
 # --- valid captures ----------------------------------------------------------------------------
 
 def test_valid_capture(cap):
-    edit(cap, lambda m: m.update(robot="franka_panda"))
+    edit(cap, lambda m: m.update(robot="custom_arm"))   # unknown robots: vectors not checked
     c = load_capture(cap)
-    assert isinstance(c, Capture) and c.root == cap and c.robot == "franka_panda"
+    assert isinstance(c, Capture) and c.root == cap and c.robot == "custom_arm"
     assert len(c.frames) == 5 and [f.index for f in c.frames] == list(range(5))
     assert [f.phase for f in c.frames] == ["static"] * 3 + ["interaction"] * 2
     assert [f.time for f in c.frames] == [None, None, None, 0, 1] and c.times == [0, 1]

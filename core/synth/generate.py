@@ -51,6 +51,7 @@ from ..sim.client import Scene
 from . import sensor
 from .asset import AssetSpec, load_asset
 from .objects import KINDS, ObjectSpec, random_spec
+from .robot import RobotInScene, check_robot, plan_robot, robot_keys
 from .room import room_urdf
 from .texture import make_texture
 
@@ -64,7 +65,7 @@ _MAX_PER_CATEGORY = 1000
 def generate_object(out: str | Path, category: str, seed: int, *, width: int = 160,
                     height: int = 120, static_views: int = 24, steps: int = 6,
                     depth_noise: float = 0.0, simultaneous: bool = False,
-                    regime: Regime | None = None) -> Path:
+                    regime: Regime | None = None, robot: str | None = None) -> Path:
     """Generate one object of ``category`` from ``seed`` and write its capture folder ``out``.
 
     An existing folder is replaced only if it is an earlier synthetic capture (has ``gt.json``).
@@ -74,21 +75,25 @@ def generate_object(out: str | Path, category: str, seed: int, *, width: int = 1
     _check_category(category, regime)
     _check_seed(seed)
     _check_target(Path(out))
+    check_robot(robot)
     spec = random_spec(category, seed, variety=regime.variety)
     return _generate(Path(out), spec, width, height, static_views, steps, depth_noise,
-                     simultaneous, regime)
+                     simultaneous, regime, robot)
 
 
 def generate_asset(out: str | Path, urdf_path: str | Path, seed: int, *, kind: str | None = None,
                    joints: list[str] | None = None, size: float | None = None,
                    width: int = 160, height: int = 120, static_views: int = 24, steps: int = 6,
                    depth_noise: float = 0.0, simultaneous: bool = False,
-                   regime: Regime | None = None) -> Path:
+                   regime: Regime | None = None, robot: str | None = None) -> Path:
     """Render an articulated URDF asset (core.synth.asset) into the capture folder ``out``."""
     regime = regime or make_regime("tight")
     _check_options(width, height, static_views, steps, depth_noise)
     _check_seed(seed)
     _check_target(Path(out))
+    if robot is not None:
+        raise InputError("command line", "--robot works with procedural objects only, not yet "
+                         "with --urdf assets", field="robot")
     spec = load_asset(urdf_path, seed, kind=kind, joints=joints, size=size)
     return _generate(Path(out), spec, width, height, static_views, steps, depth_noise,
                      simultaneous, regime)
@@ -291,7 +296,8 @@ def _orbit_camera(K: np.ndarray, width: int, height: int, centre: np.ndarray, az
 
 
 def _write_capture(root: Path, spec: Subject, width: int, height: int, static_views: int,
-                   steps: int, depth_noise: float, simultaneous: bool, regime: Regime) -> None:
+                   steps: int, depth_noise: float, simultaneous: bool, regime: Regime,
+                   robot: str | None = None) -> None:
     K = intrinsics(FOCAL_FACTOR * width, FOCAL_FACTOR * width, width / 2, height / 2)
     key = list(spec.key)
     rng = np.random.default_rng(key + [1])
@@ -311,8 +317,10 @@ def _write_capture(root: Path, spec: Subject, width: int, height: int, static_vi
     shots += [(f"t{t:03d}_cam{c}", cam, states, {"phase": "interaction", "time": t})
               for t, states in enumerate(schedule) for c, cam in enumerate(fixed)]
     frames: list[dict[str, Any]] = []
+    plan = plan_robot(spec, schedule, robot) if robot else None
     with Scene() as scene, tempfile.TemporaryDirectory(prefix="artgs-room-") as scratch:
         body = _load_subject(scene, spec, urdf_path)
+        arm = RobotInScene(scene.client, plan) if plan else None
         if regime.room:
             lo, hi = spec.bounds()
             eyes = np.array([cam.center for cam in statics + fixed])
@@ -326,12 +334,16 @@ def _write_capture(root: Path, spec: Subject, width: int, height: int, static_vi
         for stem, camera, states, extra in shots:
             if states is not None:
                 scene.set_states(body, states)
+            if arm is not None and extra["phase"] == "interaction":
+                extra = {**extra, "robot_joint_positions": arm.show(extra["time"])}
             # open parts stay within 3 bounding radii of the centre: the far plane never clips
             far = float(np.linalg.norm(camera.center - centre)) + max(4.0 * radius,
                                                                       4.0 if regime.room else 0.0)
             frame = scene.render(camera, 0.05, far)
             rgb, mask = frame.rgb, frame.body == body.id
-            depth = frame.depth if regime.room else np.where(mask, frame.depth, 0.0)
+            # depth of the object and of the robot (in RGB and depth, never in the masks)
+            seen = mask | (frame.body == arm.body) if arm is not None else mask
+            depth = frame.depth if regime.room else np.where(seen, frame.depth, 0.0)
             depth = depth.astype(np.float32)
             if depth_noise > 0:
                 noisy = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
@@ -354,7 +366,8 @@ def _write_capture(root: Path, spec: Subject, width: int, height: int, static_vi
 
     atomic.write_json(root / "transforms.json", {
         "camera_model": "PINHOLE", "fl_x": float(K[0, 0]), "fl_y": float(K[1, 1]),
-        "cx": float(K[0, 2]), "cy": float(K[1, 2]), "w": width, "h": height, "frames": frames})
+        "cx": float(K[0, 2]), "cy": float(K[1, 2]), "w": width, "h": height,
+        **(robot_keys(plan) if plan else {}), "frames": frames})
     meta: dict[str, Any] = {"category": spec.category, "seed": spec.seed}
     if regime != make_regime("tight"):
         meta["regime"] = {k: v for k, v in regime.__dict__.items()}

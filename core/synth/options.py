@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from ..model.categories import CATEGORIES, EXTRA_KINDS
 from ..model.regime import PRESETS
 from ..model.registry import option
+from ..model.robots import ROBOTS
 
 
 @dataclass
@@ -35,3 +36,5 @@ class SynthOptions:
                                       "in core/synth/asset.py)")
     size: float | None = option(None, "--urdf: largest dimension in metres (default: drawn for "
                                 "the kind)")
+    robot: str | None = option(None, "robot arm that opens the parts in the interaction frames "
+                               "(in RGB and depth, not in the masks)", choices=tuple(ROBOTS))
