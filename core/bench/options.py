@@ -62,11 +62,12 @@ class BenchProposeOptions:
 class BenchOptimiseOptions:
     """``artgs bench-optimise``: joint accuracy without and with the optimisation; basin rate."""
 
-    data: str | None = option(None, "benchmark set from `artgs synth` (default: generate one)")
+    set: str | None = option(None, SET_HELP)
+    data: str | None = option(None, "capture folders already made (= --set data:DIR)")
     per_category: int = option(1, "objects per category (generated sets)")
     seed: int = option(0, "seed of the generated set")
     category: list[str] | None = option(None, "generated sets: only these categories",
-                                        choices=CATEGORIES)
+                                        choices=CATEGORIES + EXTRA_KINDS)
     width: int = option(160, "generated sets: image width")
     height: int = option(120, "generated sets: image height")
     iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
