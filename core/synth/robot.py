@@ -248,7 +248,7 @@ class _Arm:
 
 
 class RobotInScene:
-    """The planned robot loaded into a render client (core/synth/render.py's Scene); out of sight
+    """The planned robot loaded into a render client (core/sim/client.py's Scene); out of sight
     (far below the floor) until :meth:`show`."""
 
     def __init__(self, client: int, plan: RobotPlan) -> None:
