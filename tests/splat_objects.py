@@ -1,5 +1,5 @@
 """Test helper: an output folder holding a splat sampled on a synthetic object's boxes and its
-ground-truth joints as ``articulation.json`` (no reconstruction, so export/check tests are fast)."""
+ground-truth joints as ``articulation.json`` (and ``proposals.json``) (no reconstruction, so export/check tests are fast)."""
 
 from __future__ import annotations
 
@@ -44,12 +44,13 @@ def splat_of(spec: ObjectSpec, spacing: float = 0.012, seed: int = 0) -> SplatAr
 
 
 def make_out(out: Path, category: str = "cabinet", seed: int = 0) -> tuple[ObjectSpec, Articulation]:
-    """Write OUT/splat.ply, OUT/articulation.json (ground truth with extents, handles) and
-    OUT/gt.urdf; returns the spec and the articulation."""
+    """Write OUT/splat.ply, OUT/articulation.json and proposals.json (ground truth with extents,
+    handles) and OUT/gt.urdf; returns the spec and the articulation."""
     spec = random_spec(category, seed)
     out.mkdir(parents=True, exist_ok=True)
     write_ply(out / layout.SPLAT, splat_of(spec))
     art = _ground_truth(spec, [{q.name: 0.0 for q in spec.parts}])
     write_articulation(out / layout.ARTICULATION, art)
+    write_articulation(out / layout.PROPOSALS, art)
     (out / "gt.urdf").write_text(spec.to_urdf())
     return spec, art

@@ -144,3 +144,14 @@ def test_separation_keeps_the_object_and_drops_floor_and_wall():
     precision = (sep.mask & truth).sum() / sep.mask.sum()
     assert recall > 0.95 and precision > 0.97, (recall, precision, sep.removed)
     assert sep.floor is not None and abs(sep.floor[0] @ [0, 0, 1]) > 0.99
+
+
+def test_the_robot_opens_every_part_of_the_exported_model(exported):
+    from artgs.core.model.registry import CheckOptions
+    from artgs.core.pipeline import run_stage
+
+    out, _, art, _ = exported
+    (out / layout.PROPOSALS).write_text((out / layout.ARTICULATION).read_text())
+    figures = run_stage("check", out, CheckOptions(frames=2), Progress("quiet"))
+    assert figures["urdf"].endswith(layout.URDF)
+    assert all(r["success"] for r in figures["joints"].values()), figures["joints"]

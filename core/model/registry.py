@@ -148,6 +148,9 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec("export", "Export", "part meshes, collision pieces and OUT/model.urdf, validated",
               reads=(layout.SPLAT, layout.ARTICULATION), writes=(layout.URDF,),
               options=ExportOptions, run="stages.export.stage:run"),
+    StageSpec("check", "Check", "a robot opens every part in PyBullet along the estimated joints",
+              reads=(layout.PROPOSALS,), writes=(layout.CHECK_STRIP,),
+              options=CheckOptions, run="stages.check.stage:run", needs_capture=False),
 )
 
 
