@@ -53,7 +53,7 @@ ROBOT_MODELS = {
     "franka_panda": RobotModel("franka_panda/panda.urdf", "panda_grasptarget",
                                (0.0, -0.3, 0.0, -2.3, 0.0, 3.3, 0.785),
                                ("panda_finger_joint1", "panda_finger_joint2")),
-    "xarm6": RobotModel("xarm/xarm6_robot.urdf", "link6", (0.0, -0.3, -0.9, 0.0, 1.2, 0.0)),
+    "xarm6": RobotModel("xarm/xarm6_robot.urdf", "link6", (0.0, -0.5, -0.5, 0.0, -0.5, 0.0)),
 }
 
 
