@@ -90,10 +90,9 @@ def read_urdf(path: str | Path) -> UrdfModel:
                 else:
                     limit = (float(lim.get("lower", 0)) if lim is not None else 0.0,
                              float(lim.get("upper", 0)) if lim is not None else 0.0)
-                parent_joint = parent if parent == roots[0] else parent
                 world_joints.append(Joint(j.get("name"), "prismatic" if kind == "prismatic"
                                           else "revolute", T[:3, :3] @ axis, T[:3, 3],
-                                          limit, parent=parent_joint, child=link))
+                                          limit, parent=parent, child=link))
             pending.remove(link)
     # joints' parent links: the nearest link up the tree moved by a joint (or the root)
     for wj in world_joints:
@@ -122,11 +121,9 @@ def rewrite_joints(src: str | Path, joints: list[Joint], dst: str | Path) -> Non
     poses = dict(model.link_poses)
     by_name = {j.name: j for j in joints}
     link_el = {el.get("name"): el for el in robot.findall("link")}
-    joint_el = {el.get("name"): el for el in robot.findall("joint")}
     # new world pose of each link: the edited joint's origin, the link's old orientation
     new_poses = dict(poses)
-    order = sorted(model.joints, key=lambda j: _depth(j.child, robot))
-    for wj in order:
+    for wj in model.joints:
         if wj.name not in by_name:
             continue
         new = by_name[wj.name]
@@ -169,16 +166,6 @@ def rewrite_joints(src: str | Path, joints: list[Joint], dst: str | Path) -> Non
                 mesh.set("filename", str(resolved))
     dst.parent.mkdir(parents=True, exist_ok=True)
     tree.write(dst, encoding="unicode", xml_declaration=True)
-    del joint_el
-
-
-def _depth(link: str, robot: ET.Element) -> int:
-    parent = {j.find("child").get("link"): j.find("parent").get("link")
-              for j in robot.findall("joint")}
-    d = 0
-    while link in parent:
-        link, d = parent[link], d + 1
-    return d
 
 
 def _parse(path: Path) -> ET.ElementTree:
