@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ..model.categories import CATEGORIES, EXTRA_KINDS
-from ..model.registry import DEVICES, option
+from ..model.registry import DEVICES, ROBOTS, option
 from ..render.constants import LOW_PASS
 
 
@@ -92,4 +92,21 @@ class BenchBatchOptions:
     workers: list[int] = field(default_factory=lambda: [1, 2],
                                metadata={"help": "worker counts to time"})
     ray: bool = option(False, "run the batches on a private local Ray instead of the process pool")
+    device: str = option("auto", "where torch work runs", choices=DEVICES)
+
+
+@dataclass
+class BenchCheckOptions:
+    """``artgs bench-check``: manipulation success per category (the paper's Table II)."""
+
+    data: str | None = option(None, "benchmark set from `artgs synth` (default: generate one)")
+    per_category: int = option(2, "objects per category (generated sets)")
+    seed: int = option(0, "seed of the generated set")
+    category: list[str] | None = option(None, "generated sets: only these categories",
+                                        choices=CATEGORIES)
+    width: int = option(160, "generated sets: image width")
+    height: int = option(120, "generated sets: image height")
+    iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
+                             "depth-initialised splat)")
+    robot: str = option("franka_panda", "robot from pybullet_data", choices=ROBOTS)
     device: str = option("auto", "where torch work runs", choices=DEVICES)

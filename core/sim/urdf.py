@@ -153,8 +153,11 @@ def joint_in_parent(parent_to_world: np.ndarray, axis_world, point_world
     return origin, (float(axis[0]), float(axis[1]), float(axis[2]))
 
 
-def write_urdf(robot: str, links: list[Link], joints: list[UrdfJoint]) -> str:
-    """URDF text of the robot; checks that names are unique and joints connect known links."""
+def write_urdf(robot: str, links: list[Link], joints: list[UrdfJoint], extensions: str = "") -> str:
+    """URDF text of the robot; checks that names are unique and joints connect known links.
+
+    ``extensions``: XML put verbatim inside ``<robot>`` for other readers (e.g. a ``<mujoco>``
+    element; PyBullet and yourdfpy ignore unknown elements)."""
     names = [sanitize_name(k.name) for k in links]
     if len(set(names)) != len(names):
         raise ValueError(f"duplicate link names in {names}")
@@ -167,6 +170,8 @@ def write_urdf(robot: str, links: list[Link], joints: list[UrdfJoint]) -> str:
             if sanitize_name(end) not in known:
                 raise ValueError(f"joint {j.name!r} refers to unknown link {end!r}")
     lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(sanitize_name(robot))}>"]
+    if extensions:
+        lines.append(f"  {extensions}")
     for link in links:
         lines += _link(link)
     for j in joints:
