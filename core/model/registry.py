@@ -59,6 +59,9 @@ class ProposeOptions:
                                       shared=True)
     vlm_model: str | None = option(None, "model name (default: $ARTGS_VLM_MODEL)", shared=True)
     vlm_timeout: float = option(60.0, "seconds per request", shared=True)
+    robot_twin: bool = option(True, "explain the robot arm's pixels by its twin (the robot's "
+                              "Gaussians posed by robot_joint_positions); --no-robot-twin for the "
+                              "ablation", shared=True)
 
 
 @dataclass(frozen=True)

@@ -78,12 +78,13 @@ class MotionConfig:
 
 @dataclass
 class View:
-    """One fixed interaction camera: its depth per step, masks, and closed-state depth."""
+    """One fixed interaction camera: its object depth per step, free space per step (see
+    :func:`object_depth`), and closed-state depth."""
 
     name: str
     camera: Camera
     depth: dict[int, np.ndarray]
-    mask: dict[int, np.ndarray | None]
+    free: dict[int, np.ndarray]
     ref: np.ndarray
     ref_source: str
     threshold: float = 0.0            # change threshold between measurements (m)
@@ -100,6 +101,18 @@ class View:
             d = self.depth[t]
             self.ranges[key] = (d > 0) & ((self.ref <= 0) | (d < self.ref - self.ref_threshold))
         return self.ranges[key]
+
+    def free_near(self, t: int) -> np.ndarray:
+        """Free space (:func:`object_depth`) that a pixel's whole 3x3 neighbourhood agrees on."""
+        key = f"free{t}"
+        if key not in self.ranges:
+            self.ranges[key] = minimum_filter(self.free[t], size=3, mode="nearest")
+        return self.ranges[key]
+
+    def occluder(self, t: int) -> np.ndarray:
+        """Depth of something in front that is not the object (robot, hand), inf where none."""
+        f = self.free[t]
+        return np.where((f > 0) & np.isfinite(f), f, np.inf)
 
     def nearest_at(self, t: int) -> np.ndarray:
         """Nearest valid depth in each pixel's 3x3 neighbourhood at step ``t`` (0: none)."""
@@ -167,19 +180,23 @@ def group_views(frames: list[Frame]) -> list[list[Frame]]:
     return [sorted(g, key=lambda f: f.time) for g in groups]
 
 
-def make_views(capture: Capture, render_depth, config: MotionConfig) -> list[View]:
+def make_views(capture: Capture, render_depth, config: MotionConfig, robot_depth=None
+               ) -> list[View]:
     """Views of the interaction cameras; ``render_depth(camera) -> (H,W)`` gives the closed state
-    where a camera has no time-0 frame."""
+    where a camera has no time-0 frame; ``robot_depth(frame) -> (H,W) | None`` the robot twin's
+    depth (0 where it does not cover the pixel; see :func:`object_depth`)."""
     t0 = CLOSED_TIME
     views = []
     for k, g in enumerate(group_views(capture.interaction)):
-        depth = {f.time: _depth(f) for f in g}
-        mask = {f.time: f.mask for f in g}
+        depth, free = {}, {}
+        for f in g:
+            depth[f.time], free[f.time] = object_depth(
+                f, None if robot_depth is None else robot_depth(f), config.min_threshold)
         if g[0].time == t0:
             ref, source = depth[t0], g[0].file_path
         else:
             ref, source = render_depth(g[0].camera).astype(np.float32), "splat"
-        v = View(f"cam{k}", g[0].camera, depth, mask, ref, source)
+        v = View(f"cam{k}", g[0].camera, depth, free, ref, source)
         v.threshold, v.ref_threshold = _thresholds(v, config, source == "splat")
         v.rays = g[0].camera.pixel_rays()
         views.append(v)
@@ -191,6 +208,31 @@ def _depth(f: Frame) -> np.ndarray:
     if f.mask is not None:
         d = np.where(f.mask, d, 0.0).astype(np.float32)
     return d
+
+
+def object_depth(f: Frame, robot: np.ndarray | None, tolerance: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The object's depth in frame ``f`` (0 = not the object or not measured) and its free space:
+    per pixel, the depth up to which no object surface can be (0 = no evidence).
+
+    A pixel outside the mask shows something that is not the object: nothing of the object lies
+    in front of its measured depth, and behind it nothing is known (an arm or a hand hides it);
+    without a measurement (synthetic background) it is free all the way (inf). Pixels the robot
+    twin explains (``robot``: its rendered depth, 0 where it does not cover; the frame's depth
+    within ``max(tolerance, 2 %)`` of it, or no measurement) are such pixels too, even where there
+    is no mask or the mask holds the arm. Inside the mask there is no evidence of free space (a
+    missing measurement is just missing)."""
+    raw = np.zeros(f.rgb.shape[:2], np.float32) if f.depth is None else np.nan_to_num(f.depth)
+    if f.mask is None and robot is None:
+        return raw, np.zeros_like(raw)
+    obj = np.ones(raw.shape, bool) if f.mask is None else f.mask.copy()
+    if robot is not None:
+        tol = np.maximum(tolerance, 0.02 * robot)
+        arm = (robot > 0) & ((raw <= 0) | (np.abs(raw - robot) < tol))
+        obj &= ~arm
+        raw = np.where(arm & (raw <= 0), robot, raw)
+    free = np.where(obj, 0.0, np.where(raw > 0, raw, np.inf))
+    return np.where(obj, raw, 0.0).astype(np.float32), free
 
 
 def noise_sigma(depths: list[np.ndarray]) -> float:
@@ -254,31 +296,51 @@ def _lookup(v: View, t: int | str, points: np.ndarray
 # --- vanished points and parts ------------------------------------------------------------------
 
 def vanish_times(points: np.ndarray, views: list[View], times: list[int], spacing: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per point: first step at which a view sees through it (-1: never), and how many times.
-    ``spacing``: the points' typical spacing (m)."""
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per point: first step at which a view sees through it (-1: never), how many times, and
+    the earliest step it may have vanished at: before its first step, the steps in which every
+    view that saw it closed had something in front of it (an arm, or an opened part) and an arm
+    hid it in some view (then, or in the closed state) leave the onset open. Without an arm
+    (nothing outside the masks in front of the object) the onset is the first step. ``spacing``: the points' typical spacing (m)."""
     first = np.full(len(points), -1, np.int64)
     count = np.zeros(len(points), np.int64)
+    hidden = np.ones((len(points), len(times)), bool)
+    behind_arm = np.zeros((len(points), len(times)), bool)
     for v in views:
         inside, z, lo, hi = _lookup(v, "ref", points)
+        flat = _pixels(v, points)[1]
         if v.ref_source == "splat":   # splat points scatter about a spacing around surfaces
             seen = _front_points(v, points, spacing) & (z < hi + v.ref_threshold)
             margin = max(v.threshold, 1.5 * spacing)
         else:
             seen = inside & (lo > 0) & (z > lo - v.threshold) & (z < hi + v.threshold)
             margin = v.threshold
-        for t in times:
+        for k, t in enumerate(times):
             if t not in v.depth:
                 continue
             _, _, d, _ = _lookup(v, t, points)
+            occ = np.where(inside, v.occluder(t).reshape(-1)[flat], np.inf)
+            hidden[:, k] &= ~seen | (occ < z - margin) | ((d > 0) & (d < z - margin))
+            behind_arm[:, k] |= occ < z - margin
+            if CLOSED_TIME in v.free:   # an arm hid it in the closed state: this view's onset
+                closed = np.where(inside, v.occluder(CLOSED_TIME).reshape(-1)[flat], np.inf)
+                behind_arm[:, k] |= closed < z - margin
             # background where the part was counts only against a measured closed state (the
-            # render's silhouette is blurred: points at its rim would all seem gone)
-            empty = (d <= 0) & (v.mask[t] is not None) & (v.ref_source != "splat")
+            # render's silhouette is blurred: points at its rim would all seem gone); an arm in
+            # front of the point says nothing (object_depth)
+            free = np.where(inside, v.free[t].reshape(-1)[flat], 0.0)
+            empty = (d <= 0) & (z < free - margin) & (v.ref_source != "splat")
             gone = seen & ((d - z > margin) | empty)
             count += gone
             new = gone & ((first < 0) | (first > t))
             first[new] = t
-    return first, count
+    hidden &= behind_arm
+    step = {t: k for k, t in enumerate(times)}
+    onset = np.array([step.get(int(t), 0) for t in first])
+    for k in range(len(times) - 1, 0, -1):   # walk back over hidden steps
+        back = (onset == k) & hidden[:, k - 1] & (first >= 0)
+        onset[back] = k - 1
+    return first, count, np.array(times)[onset]
 
 
 def _front_points(v: View, points: np.ndarray, spacing: float) -> np.ndarray:
@@ -329,7 +391,8 @@ def moving_at(points: np.ndarray, views: list[View], times: list[int]) -> np.nda
 
 
 def group_parts(points: np.ndarray, first: np.ndarray, active: np.ndarray, times: list[int],
-                radius: float, min_points: int, onset_ratio: float = 2.5) -> list[np.ndarray]:
+                radius: float, min_points: int, onset_ratio: float = 2.5,
+                earliest: np.ndarray | None = None) -> list[np.ndarray]:
     """Index arrays of moving parts, largest first.
 
     Vanished points within ``radius`` of each other are linked when they first vanish at the same
@@ -337,20 +400,22 @@ def group_parts(points: np.ndarray, first: np.ndarray, active: np.ndarray, times
     :func:`moving_at`): a door's hinge side vanishes steps after its edge. A group whose count of
     newly vanished points jumps by ``onset_ratio`` from one step to the next holds a second part
     starting there (a neighbouring drawer opened after the door); the links across that step are
-    cut.
+    cut. ``earliest`` (from :func:`vanish_times`): a point hidden by an arm may have vanished as
+    early as this step, so it links with points vanishing anywhere from there to its first step.
     """
     idx = np.flatnonzero(first >= 0)
     if len(idx) == 0:
         return []
     step = {t: k for k, t in enumerate(times)}
     f = np.array([step[t] for t in first[idx]], np.int64)   # step indices (times may skip)
+    lo = f if earliest is None else np.array([step[t] for t in earliest[idx]], np.int64)
     pairs = cKDTree(points[idx]).query_pairs(radius, output_type="ndarray")
     if len(pairs):
         a, b = pairs[:, 0], pairs[:, 1]
         swap = f[a] > f[b]
         a, b = np.where(swap, b, a), np.where(swap, a, b)
-        gap = f[b] - f[a]
-        keep = (gap == 0) | ((gap == 1) & active[idx[a], f[b]])
+        gap = np.maximum(lo[b] - f[a], 0)
+        keep = (gap == 0) | ((gap == 1) & active[idx[a], np.minimum(lo[b], len(times) - 1)])
         pairs = np.stack([a, b], axis=1)[keep]
     labels = _components(len(idx), pairs)
     if len(pairs):
@@ -456,7 +521,7 @@ def projective_score(points: np.ndarray, T: np.ndarray, views: list[View], t: in
         # contradictions only where the whole 3x3 neighbourhood agrees (edges are ambiguous)
         near = np.where(inside, v.nearest_at(t).reshape(-1)[flat], 0.0)
         wrong |= (inside & (near > 0) & (z < near - v.threshold)) \
-            | (inside & (near <= 0) & (v.mask[t] is not None))
+            | (inside & (near <= 0) & (z < v.free_near(t).reshape(-1)[flat] - v.threshold))
     return float(np.where(best > 0, best, -wrong.astype(float)).sum()) / max(len(Y), 1)
 
 
@@ -492,8 +557,9 @@ def _visible(views: list[View], t: int):
         for v in views:
             if t not in v.depth:
                 continue
-            inside, z, _, hi = _lookup(v, t, points)
-            ok |= inside & ((hi <= 0) | (z - hi < v.threshold))
+            inside, z, _, hi = _lookup(v, t, points)   # a point behind an arm is not visible
+            occ = np.where(inside, v.occluder(t).reshape(-1)[_pixels(v, points)[1]], np.inf)
+            ok |= inside & (((hi <= 0) & (z < occ + v.threshold)) | (z - hi < v.threshold))
         return ok
     return keep
 
@@ -620,26 +686,29 @@ def track_part(points: np.ndarray, views: list[View], times: list[int], start: i
 
 def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.ndarray,
                    render_depth, progress: Progress = QUIET,
-                   config: MotionConfig | None = None) -> tuple[list[Joint], dict[str, Any]]:
+                   config: MotionConfig | None = None, robot_depth=None
+                   ) -> tuple[list[Joint], dict[str, Any]]:
     """Joints of the parts that move in ``capture``'s interaction frames.
 
     ``splat_means`` (N,3) and ``splat_opacity`` (N,) (0..1) are the static splat's Gaussians;
     ``render_depth(camera) -> (H,W)`` renders the splat's depth (used only for cameras without a
-    time-0 frame). Returns the joints (source ``motion``) and meta with per-part diagnostics.
+    time-0 frame); ``robot_depth(frame) -> (H,W) | None`` the robot twin's depth in a frame
+    (core/stages/robot_twin.py; None: no twin). Returns the joints (source ``motion``) and meta
+    with per-part diagnostics.
     """
     cfg = config or MotionConfig()
     times = capture.times
     progress.update("propose", 0.02, "closed state per interaction camera")
-    views = make_views(capture, render_depth, cfg)
+    views = make_views(capture, render_depth, cfg, robot_depth)
     pts = np.asarray(splat_means, float)[np.asarray(splat_opacity) >= cfg.min_opacity]
     spacing = float(np.median(cKDTree(pts).query(pts, k=2)[0][:, 1])) if len(pts) > 1 else 0.01
     pts = pts[~floaters(pts, capture.static, max(cfg.min_threshold, 1.5 * spacing))]
     mark_changed(views, pts, spacing)
-    first, count = vanish_times(pts, views, times, spacing)
+    first, count, earliest = vanish_times(pts, views, times, spacing)
     first[count < 2] = -1
     min_points = max(cfg.min_part_points, int(cfg.min_part_fraction * len(pts)))
     parts = group_parts(pts, first, moving_at(pts, views, times), times,
-                        cfg.link_pixels * spacing, min_points)
+                        cfg.link_pixels * spacing, min_points, earliest=earliest)
     progress.update("propose", 0.1, f"{len(parts)} moving part(s)", parts=len(parts))
 
     clouds = {}
