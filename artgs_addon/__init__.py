@@ -1,54 +1,5 @@
 """Blender glue: preferences, properties, building and reading Blender objects, the worker client.
 
-``register()`` registers, in order: preferences, scene properties, bone properties, operators,
-then the panels (the main panel first, its sections in display order). Every module exposes a
-``CLASSES`` tuple (registered in order, unregistered in reverse) and optionally
-``register_properties()`` / ``unregister_properties()`` (called after its classes are registered
-and before they are unregistered).
+Registration lives in the package root (``artgs/__init__.py``); nothing here imports the
+operators or panels.
 """
-
-from __future__ import annotations
-
-from types import ModuleType
-
-import bpy
-
-
-def _modules() -> list[ModuleType]:
-    """The modules that register something, in registration order."""
-    from . import bone_props
-    from . import preferences
-    from . import properties
-    from ..operators import bones as bone_operators
-    from ..operators import capture, engine, propose, splat
-    from ..panels import bones as bone_panel
-    from ..panels import capture as capture_panel
-    from ..panels import pipeline, stages
-    from ..panels import splat as splat_panel
-
-    return [preferences, properties, bone_props,
-            engine, capture, splat, propose, bone_operators,
-            pipeline, capture_panel, splat_panel, bone_panel, stages]
-
-
-def register() -> None:
-    """Register preferences, properties, operators and panels."""
-    for module in _modules():
-        for cls in module.CLASSES:
-            bpy.utils.register_class(cls)
-        if hasattr(module, "register_properties"):
-            module.register_properties()
-
-
-def unregister() -> None:
-    """Unregister everything ``register`` added, in reverse order; running jobs are cancelled."""
-    from ..operators import _job
-    from . import preferences
-
-    _job.cancel_all()
-    preferences.last_check.clear()
-    for module in reversed(_modules()):
-        if hasattr(module, "unregister_properties"):
-            module.unregister_properties()
-        for cls in reversed(module.CLASSES):
-            bpy.utils.unregister_class(cls)

@@ -30,15 +30,13 @@ from mathutils import Matrix, Vector
 from ..core.model.errors import ArtgsError, InputError
 from ..core.model.joints import Articulation, Joint, read_articulation, write_articulation
 from ..core.geometry.parts import assign_parts
-from .bone_props import ArtgsJointProps
+from .bone_pose import COLOURS, refresh_bone, select_only, set_joint_value
 
 SIZE_KEY = "artgs_size"    # on the armature data: object size in metres; marks ArtGS armatures
 META_KEY = "artgs_meta"    # on the armature data: the joints file's top-level fields (JSON)
 NAME_KEY = "artgs_name"    # on the armature data: the ``name`` it was built under
 OUTPUT_KEY = "artgs_output"  # on the armature object: the output folder its joints belong to
 BONE_LENGTH = 0.25         # bone length as a fraction of the object size
-COLOURS = {"revolute": "THEME04", "prismatic": "THEME03"}  # bone colour palettes: blue, green
-CONSTRAINT = "ArtGS Limit"
 MODIFIER = "ArtGS Joints"
 NEW_LIMITS = {"revolute": (0.0, math.pi / 2), "prismatic": (0.0, 0.5)}  # prismatic: x object size
 _MAX_NAME_BYTES = 63       # Blender truncates longer bone names
@@ -196,11 +194,8 @@ def add_joint(context: bpy.types.Context, obj: bpy.types.Object, origin, axis=(0
         props.lower, props.upper = lower, upper
         props.parent_link, props.child_link, props.source = "base", f"{eb.name}_link", "user"
         eb.color.palette = COLOURS[joint_type]
-        for other in bones:
-            other.select = other.select_head = other.select_tail = False
-        eb.select = eb.select_head = eb.select_tail = True
-        bones.active = eb
         name = eb.name
+        select_only(obj, name)
     refresh_bone(obj, name)
     return name
 
@@ -244,72 +239,10 @@ def save_joints(obj: bpy.types.Object, path: str | Path) -> list[Joint]:
     return joints
 
 
-def set_joint_value(obj: bpy.types.Object, name: str, value: float) -> None:
-    """Pose bone ``name`` at joint value ``value`` (radians, or metres in the world)."""
-    pb = obj.pose.bones[name]
-    pb.location = (0.0, 0.0, 0.0)
-    pb.rotation_euler = (0.0, 0.0, 0.0)
-    pb.rotation_quaternion = (1.0, 0.0, 0.0, 0.0)
-    pb.scale = (1.0, 1.0, 1.0)
-    if obj.data.bones[name].artgs_joint.joint_type == "revolute":
-        pb.rotation_euler = (0.0, value, 0.0)
-    else:
-        pb.location = (0.0, value / _world_per_unit(obj, name), 0.0)
 
 
-def refresh_bone(obj: bpy.types.Object, name: str, props: ArtgsJointProps | None = None) -> None:
-    """Set bone ``name``'s pose locks, limit constraint and colour from its joint settings.
-
-    ``props`` are the settings to use (default: the bone's; in edit mode, the edit bone's).
-    """
-    bone = obj.data.bones.get(name)
-    pb = obj.pose.bones.get(name)
-    if bone is None or pb is None:
-        return  # a bone added in edit mode gets its pose bone when edit mode ends
-    if props is None:
-        props = bone.artgs_joint
-        bone.color.palette = COLOURS[props.joint_type]
-    revolute = props.joint_type == "revolute"
-    pb.rotation_mode = "XYZ"
-    pb.lock_location = (True, revolute, True)
-    pb.lock_rotation = (True, not revolute, True)
-    pb.lock_rotation_w = True
-    pb.lock_scale = (True, True, True)
-    for con in [c for c in pb.constraints if c.name.startswith(CONSTRAINT)]:
-        pb.constraints.remove(con)
-    # every channel is limited (locks only guide the interactive tools): zero but the joint's own
-    rot = pb.constraints.new("LIMIT_ROTATION")
-    rot.name = f"{CONSTRAINT} Rotation"
-    rot.use_limit_x = rot.use_limit_y = rot.use_limit_z = True
-    loc = pb.constraints.new("LIMIT_LOCATION")
-    loc.name = f"{CONSTRAINT} Location"
-    for axis in "xyz":
-        setattr(loc, f"use_min_{axis}", True)
-        setattr(loc, f"use_max_{axis}", True)
-    if revolute:
-        rot.min_y, rot.max_y = props.lower, props.upper
-    else:
-        unit = _world_per_unit(obj, name)
-        loc.min_y, loc.max_y = props.lower / unit, props.upper / unit
-    for con in (rot, loc):
-        con.owner_space = "LOCAL"
-        con.use_transform_limit = True
 
 
-def refresh_joint_bone(props: ArtgsJointProps) -> None:
-    """Update callback of the joint settings: refresh the bone they belong to, in every user."""
-    arm = props.id_data
-    if not isinstance(arm, bpy.types.Armature):
-        return
-    ptr = props.as_pointer()
-    owner = next((b for b in (*arm.edit_bones, *arm.bones) if b.artgs_joint.as_pointer() == ptr),
-                 None)
-    if owner is None:
-        return
-    owner.color.palette = COLOURS[props.joint_type]
-    for obj in bpy.data.objects:
-        if obj.data == arm and obj.pose is not None:
-            refresh_bone(obj, owner.name, props)
 
 
 @contextmanager
@@ -345,7 +278,7 @@ def _place(eb: bpy.types.EditBone, to_arm: Matrix, origin: np.ndarray, axis: np.
     eb.use_deform = True
 
 
-def _fill(props: ArtgsJointProps, joint: Joint) -> None:
+def _fill(props, joint: Joint) -> None:
     props.joint_type = joint.type
     props.lower, props.upper = joint.limit
     props.parent_link = joint.parent
@@ -393,11 +326,6 @@ def _same(a: Joint, b: Joint, size: float) -> bool:
             and all(abs(x - y) <= 1e-6 * max(1.0, abs(y)) for x, y in zip(a.limit, b.limit)))
 
 
-def _world_per_unit(obj: bpy.types.Object, name: str) -> float:
-    """World metres per armature unit along bone ``name`` (its pose Y axis)."""
-    bone = obj.data.bones[name]
-    direction = (bone.tail_local - bone.head_local).normalized()
-    return (obj.matrix_world.to_3x3() @ direction).length
 
 
 def _bind_preview(obj: bpy.types.Object, preview: bpy.types.Object, joints: list[Joint],

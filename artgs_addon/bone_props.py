@@ -4,7 +4,7 @@ Registered on both bone types so the settings can be read and edited in every mo
 bone's properties into edit mode and back, so they survive edit mode. Limits are stored once
 (``lower``/``upper``, radians or metres in the world frame); ``*_angle`` and ``*_distance`` are
 views of the same values with angle or length units for the panel. Changing the type or a limit
-updates the bone's pose locks, limit constraint and colour at once (see armature.py).
+updates the bone's pose locks, limit constraint and colour at once (see bone_pose.py).
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ import json
 
 import bpy
 from bpy.props import EnumProperty, FloatProperty, PointerProperty, StringProperty
+
+from .bone_pose import refresh_joint_bone
 
 JOINT_TYPE_ITEMS = (
     ("revolute", "Revolute", "Rotates about the bone (head to tail is the hinge axis)"),
@@ -26,8 +28,6 @@ SOURCE_ITEMS = (
 
 
 def _changed(self: "ArtgsJointProps", context: bpy.types.Context | None) -> None:
-    from .armature import refresh_joint_bone  # armature.py imports this module
-
     refresh_joint_bone(self)
 
 

@@ -90,7 +90,8 @@ def _point_material() -> bpy.types.Material:
     if mat is not None:
         return mat
     mat = bpy.data.materials.new(_MATERIAL)
-    mat.use_nodes = True
+    if mat.node_tree is None:  # Blender 4.x; 5.x materials always have nodes (use_nodes goes in 6.0)
+        mat.use_nodes = True
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
     attr = nodes.new("ShaderNodeAttribute")

@@ -1,5 +1,10 @@
-"""Add-on preferences: the engine interpreter, the VLM endpoint (key kept out of .blend files),
-the compute device and the preview point cap."""
+"""Add-on preferences: the engine interpreter (and setting one up), the VLM endpoint (key kept out
+of .blend files), the compute device and the preview point cap.
+
+The engine interpreter is also kept in ``engine.json`` in the extension's user folder
+(engine_setup.py), so it survives disabling the add-on and restarts: the preference, when set,
+wins; else the stored engine; else ``default_engine()``.
+"""
 
 import sys
 from pathlib import Path
@@ -7,6 +12,8 @@ from types import SimpleNamespace
 
 import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
+
+from . import engine_setup
 
 #: The root package: ``artgs`` as a Python module, ``bl_ext.<repo>.artgs`` inside Blender.
 ADDON_ID = __package__.rpartition(".")[0]
@@ -26,6 +33,18 @@ def default_engine() -> str:
     return sys.executable
 
 
+TORCH_BUILDS = (("cpu", "CPU", "The CPU build of torch (works everywhere)"),
+                ("cuda", "CUDA", "A CUDA build of torch (NVIDIA GPU with a recent driver)"))
+
+
+def user_folder() -> Path:
+    """The extension's user folder (kept across updates and restarts); for the package
+    registered as a plain add-on (bpy as a module), Blender's config folder ``artgs``."""
+    if ADDON_ID.startswith("bl_ext."):
+        return Path(bpy.utils.extension_path_user(ADDON_ID, create=True))
+    return Path(bpy.utils.user_resource("CONFIG", path="artgs", create=True))
+
+
 def get(context: bpy.types.Context | None = None):
     """The add-on's preferences; their defaults when the package was registered without
     ``addon_utils`` (e.g. ``import artgs; artgs.register()`` with bpy as a module)."""
@@ -34,8 +53,25 @@ def get(context: bpy.types.Context | None = None):
 
 
 def engine_python(context: bpy.types.Context | None = None) -> str:
-    """The interpreter that runs the engine (the preference, or the default when empty)."""
-    return bpy.path.abspath(get(context).engine_python) or default_engine()
+    """The interpreter that runs the engine: the preference, else the stored engine, else the
+    default."""
+    chosen = bpy.path.abspath(get(context).engine_python)
+    return chosen or engine_setup.load_state(user_folder()).python or default_engine()
+
+
+def _engine_chosen(self, context: bpy.types.Context) -> None:
+    """The preference is stored too (it survives disable/enable and restarts); clearing it
+    goes back to the default engine."""
+    chosen = bpy.path.abspath(self.engine_python)
+    folder = user_folder()
+    if engine_setup.load_state(folder).python != chosen:
+        engine_setup.save_state(folder, engine_setup.EngineState(
+            python=chosen, message="chosen in the preferences" if chosen else ""))
+
+
+def preview_cap(context: bpy.types.Context) -> int:
+    """Points allowed in a preview: the preference's cap times the scene's density."""
+    return max(1, int(get(context).preview_cap * context.scene.artgs.preview_density))
 
 
 #: Outcome of the last "Check Engine" (kept in memory only, shown in the preferences).
@@ -46,9 +82,20 @@ class ArtgsPreferences(bpy.types.AddonPreferences):
     bl_idname = ADDON_ID
 
     engine_python: StringProperty(
-        name="Engine Python", subtype="FILE_PATH",
+        name="Engine Python", subtype="FILE_PATH", update=_engine_chosen,
         description="Python interpreter of the environment where the ArtGS engine (torch, numba, "
-                    "...) is installed; empty: " + "the .venv beside the add-on, else Blender's own")
+                    "...) is installed; empty: the one Set Up Engine made, else the .venv beside "
+                    "the add-on, else Blender's own")
+    setup_python: StringProperty(
+        name="Python for Set Up", subtype="FILE_PATH",
+        description="Python (a version the engine supports) to make the engine's environment "
+                    "with; empty: found on this computer (PATH, pyenv, py launcher, uv)")
+    setup_torch: EnumProperty(name="Torch", items=TORCH_BUILDS, default="cpu",
+                              description="Which torch build Set Up Engine installs")
+    setup_wheels: StringProperty(
+        name="Wheel Folder", subtype="DIR_PATH",
+        description="Install everything from the wheels in this folder only (offline); empty: "
+                    "from the package indexes (needs Allow Online Access)")
     vlm_endpoint: StringProperty(
         name="VLM Endpoint", default="",
         description="OpenAI-compatible base URL of the vision-language model, "
@@ -71,9 +118,10 @@ class ArtgsPreferences(bpy.types.AddonPreferences):
         row.prop(self, "engine_python")
         row.operator("artgs.check_engine", icon="CHECKMARK")
         if not self.engine_python:
-            col.label(text=f"Using: {default_engine()}", icon="INFO")
+            col.label(text=f"Using: {engine_python(context)}", icon="INFO")
         for line in last_check:
             col.label(text=line)
+        self._draw_setup(layout.box())
         col.separator()
         col.prop(self, "device")
         col.prop(self, "preview_cap")
@@ -85,6 +133,25 @@ class ArtgsPreferences(bpy.types.AddonPreferences):
         if not bpy.app.online_access:
             box.label(text="Online access is off: enable Preferences > System > Network > "
                            "Allow Online Access to use the VLM", icon="ERROR")
+
+
+    def _draw_setup(self, box: bpy.types.UILayout) -> None:
+        state = engine_setup.load_state(user_folder())
+        row = box.row()
+        row.label(text="Set up the engine in the add-on's own folder")
+        row.operator("artgs.setup_engine", icon="CONSOLE")
+        box.prop(self, "setup_torch", expand=True)
+        box.prop(self, "setup_python")
+        box.prop(self, "setup_wheels")
+        if state.status != "NONE":
+            icon = {"READY": "CHECKMARK", "FAILED": "ERROR"}.get(state.status, "INFO")
+            box.label(text=f"Last set-up: {state.status.lower()}: {state.message}", icon=icon)
+        note = state.version_note()
+        if note:
+            box.label(text=note, icon="ERROR")
+        if not bpy.app.online_access and not self.setup_wheels:
+            box.label(text="Online access is off: Set Up Engine needs Preferences > System > "
+                           "Network > Allow Online Access, or a wheel folder", icon="ERROR")
 
 
 def _defaults() -> SimpleNamespace:

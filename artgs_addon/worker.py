@@ -1,7 +1,7 @@
 """The engine worker: one ``python -m artgs COMMAND ... --json`` subprocess, read without blocking.
 
 No bpy here (unit-tested outside Blender). Reader threads move the worker's JSON progress lines
-(protocol in ``core/model/progress.py``) into a queue; ``poll()`` drains it. ``cancel()`` terminates the
+(protocol in ``core/model/protocol.py``) into a queue; ``poll()`` drains it. ``cancel()`` terminates the
 process (the engine exits 130 on SIGTERM) and kills it after a grace period. A process stopped this
 way counts as cancelled however it ended: 130, or killed by the signal itself when it came before
 the engine installed its handler (still starting Python or importing), or killed after the grace
@@ -22,8 +22,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
-#: Exit code of a cancelled engine command (core/cli/main.py).
-CANCELLED = 130
+from ..core.model import protocol
 
 
 @dataclass
@@ -53,9 +52,9 @@ def parse_line(line: str) -> dict[str, Any]:
             event = json.loads(text)
         except json.JSONDecodeError:
             event = None
-        if isinstance(event, dict) and isinstance(event.get("event"), str):
+        if isinstance(event, dict) and isinstance(event.get(protocol.EVENT), str):
             return event
-    return {"event": "log", "level": "info", "message": text}
+    return {protocol.EVENT: protocol.LOG, "level": "info", "message": text}
 
 
 class Worker:
@@ -127,12 +126,12 @@ class Worker:
                 event = self._events.get_nowait()
             except queue.Empty:
                 break
-            kind = event.get("event")
-            if kind == "error":
+            kind = event.get(protocol.EVENT)
+            if kind == protocol.ERROR:
                 self.error = str(event.get("message", "unknown engine error"))
-            elif kind == "finished":
+            elif kind == protocol.FINISHED:
                 self.outputs = dict(event.get("outputs") or {})
-            elif kind == "progress":
+            elif kind == protocol.PROGRESS:
                 self.last_progress = event
             events.append(event)
         return events
@@ -183,7 +182,7 @@ class Worker:
             t.join()
         self.poll()
         code = self._proc.returncode
-        cancelled = code == CANCELLED or (self._terminated and code != 0)
+        cancelled = code == protocol.EXIT_CANCELLED or (self._terminated and code != 0)
         error = None
         if cancelled:
             error = "cancelled"

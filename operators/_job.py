@@ -16,6 +16,7 @@ import bpy
 from ..artgs_addon import preferences
 from ..artgs_addon.properties import ArtgsStageState
 from ..artgs_addon.worker import Worker, WorkerResult
+from ..core.model import protocol
 from ..core.model.errors import ArtgsError
 
 #: Jobs running in the UI: (worker, timer). At most one at a time; unregister cancels them.
@@ -118,14 +119,14 @@ class WorkerOperator:
     def _on_events(self, context: bpy.types.Context, events: list[dict[str, Any]]) -> None:
         state = self._state(context)
         for event in events:
-            kind = event.get("event")
-            if kind == "progress":
+            kind = event.get(protocol.EVENT)
+            if kind == protocol.PROGRESS:
                 stage, message = event.get("stage", ""), event.get("message", "")
                 state.progress = float(event.get("fraction", 0.0))
                 state.message = f"{stage}: {message}".strip(": ")
-            elif kind == "stage_done":
+            elif kind == protocol.STAGE_DONE:
                 self._figures.update(event.get("figures") or {})
-            elif kind == "log" and event.get("level") == "warning":
+            elif kind == protocol.LOG and event.get("level") == "warning":
                 self.report({"WARNING"}, str(event.get("message", "")))
 
     def _complete(self, context: bpy.types.Context) -> set[str]:

@@ -9,6 +9,7 @@ from bpy.props import EnumProperty, StringProperty
 
 from ..artgs_addon.armature import (OUTPUT_KEY, add_joint, armature_name, build_armature,
                                     find_armature, output_key, remove_joint, save_joints)
+from ..artgs_addon.bone_pose import select_only
 from ..artgs_addon.bone_props import JOINT_TYPE_ITEMS
 from ..core.model.errors import ArtgsError
 from ..core.model.joints import Articulation
@@ -114,15 +115,9 @@ class ARTGS_OT_select_joint(bpy.types.Operator):
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         obj = find_armature(context)
-        bones = obj.data.edit_bones if obj.mode == "EDIT" else obj.data.bones
-        bone = bones.get(self.name)
-        if bone is None:
+        if not select_only(obj, self.name):
             self.report({"ERROR"}, f"No joint named '{self.name}' in '{obj.name}'")
             return {"CANCELLED"}
-        for other in bones:
-            other.select = False
-        bone.select = True
-        bones.active = bone
         return {"FINISHED"}
 
 

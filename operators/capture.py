@@ -18,11 +18,6 @@ from ._job import WorkerOperator, job_running
 PREVIEW_FILE = "capture_preview.npz"
 
 
-def preview_cap(context: bpy.types.Context) -> int:
-    """Points allowed in a preview: the preference's cap times the scene's density."""
-    return max(1, int(preferences.get(context).preview_cap * context.scene.artgs.preview_density))
-
-
 class ARTGS_OT_import_capture(WorkerOperator, bpy.types.Operator):
     """Add the capture's cameras and a coloured point cloud of its static depth frames (the
     capture is read and checked in the engine)"""
@@ -45,7 +40,7 @@ class ARTGS_OT_import_capture(WorkerOperator, bpy.types.Operator):
 
     def worker_args(self, context: bpy.types.Context) -> list[str]:
         return [str(context.scene.artgs.capture_path), "--preview", str(self._tmp / PREVIEW_FILE),
-                "--max-points", str(preview_cap(context))]
+                "--max-points", str(preferences.preview_cap(context))]
 
     def finish(self, context: bpy.types.Context, result: WorkerResult) -> str:
         built = build_capture(context, read_preview(self._tmp / PREVIEW_FILE))

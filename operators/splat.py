@@ -13,7 +13,6 @@ from ..artgs_addon.worker import WorkerResult
 from ..core.model import layout
 from ..core.model.errors import ArtgsError
 from ._job import WorkerOperator, engine_inputs_ready, figures_text, job_running
-from .capture import preview_cap
 
 
 def load_splat_preview(context: bpy.types.Context, path: Path) -> str:
@@ -21,7 +20,7 @@ def load_splat_preview(context: bpy.types.Context, path: Path) -> str:
     folder (previews of other output folders stay); returns the key figures."""
     settings = context.scene.artgs
     old = splat_preview_in(path.parent, settings.splat_object)
-    built = build_splat_preview(context, path, preview_cap(context))
+    built = build_splat_preview(context, path, preferences.preview_cap(context))
     if old is not None:
         mesh = old.data
         bpy.data.objects.remove(old)

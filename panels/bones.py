@@ -6,7 +6,7 @@ from __future__ import annotations
 import bpy
 
 from ..artgs_addon.armature import find_armature
-from .pipeline import draw_state
+from .common import draw_state
 
 ICONS = {"revolute": "ORIENTATION_GIMBAL", "prismatic": "EMPTY_SINGLE_ARROW"}
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from .pipeline import ArtgsPanel, draw_state
+from .common import ArtgsPanel, draw_state
 
 
 class ARTGS_PT_splat(ArtgsPanel, bpy.types.Panel):

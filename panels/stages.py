@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from .pipeline import ArtgsPanel, draw_state
+from .common import ArtgsPanel, draw_state
 
 
 def _draw_unavailable(layout: bpy.types.UILayout, action: str, icon: str, state) -> None:

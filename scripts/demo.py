@@ -3,7 +3,8 @@
     python scripts/demo.py OUT
 
 Writes OUT/capture/ (the generated capture, with its ground truth gt.json / gt.urdf) and, in OUT,
-the engine's outputs (splat.ply, proposals.json, report.json) plus scene.blend and preview.png.
+the engine's outputs (splat.ply, proposals.json, report.json) plus scene.blend, preview.png (a
+labelled contact sheet of every stage's result) and stages/<stage>.png (its panels, one per file).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ def main(argv: list[str]) -> int:
     print(f"capture: {capture} ({time.perf_counter() - t0:.1f} s)", flush=True)
     script = Path(__file__).resolve().parent / "headless_pipeline.py"
     code = subprocess.call([sys.executable, str(script), str(capture), str(out),
-                            "--iterations", str(ITERATIONS)])
+                            "--iterations", str(ITERATIONS), "--panels", str(out / "stages")])
     if code != 0:
         return code
     print(f"\nOutput folder: {out}  ({time.perf_counter() - t0:.0f} s)")

@@ -4,8 +4,8 @@
     python scripts/headless_pipeline.py CAPTURE OUT [options]        (bpy as a module)
 
 Imports the capture, reconstructs the splat and proposes the joints as an armature (each stage in
-the engine worker, as in the UI), then writes OUT/scene.blend and OUT/preview.png next to the
-engine's outputs. Inside Blender the enabled extension whose module ends in ``.artgs`` is used
+the engine worker, as in the UI), then writes OUT/scene.blend and OUT/preview.png (the engine's
+labelled contact sheet of every stage) next to the engine's outputs. Inside Blender the enabled extension whose module ends in ``.artgs`` is used
 (enabled first if installed but off); with bpy as a module the ``artgs`` package is enabled.
 Exits 1 with the engine's message if a stage fails.
 """
@@ -13,7 +13,7 @@ Exits 1 with the engine's message if a stage fails.
 from __future__ import annotations
 
 import argparse
-import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -36,7 +36,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--iterations", type=int, default=0,
                    help="reconstruction iteration cap (0: until converged)")
     p.add_argument("--engine", default="", help="engine interpreter (default: the preference)")
-    p.add_argument("--preview-size", type=int, default=320, help="preview.png width, pixels")
+    p.add_argument("--preview-size", type=int, default=240,
+                   help="width of one panel of preview.png (the contact sheet), pixels")
+    p.add_argument("--panels", type=Path, default=None,
+                   help="also write each labelled panel of the contact sheet as PANELS/<stage>.png")
     return p.parse_args(argv)
 
 
@@ -73,33 +76,17 @@ def run_stage(label: str, op, **kwargs) -> None:
     print(f"{label}: {time.perf_counter() - t0:.1f} s", flush=True)
 
 
-def render_preview(scene: bpy.types.Scene, path: Path, width: int) -> None:
-    """Render the scene's camera to ``path`` with Cycles on the CPU, 8 samples.
-
-    Cycles shows the points' colour attribute and needs no GPU context (under a second at
-    320x240 here); Workbench draws point clouds without their colours and EEVEE without a GPU
-    falls back to software OpenGL (86 s for the same image here).
-    """
-    render = scene.render
-    render.resolution_percentage = max(1, round(100 * width / render.resolution_x))
-    render.image_settings.file_format = "PNG"
-    render.filepath = str(path)
-    render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = 8
-    scene.cycles.use_denoising = False
-    scene.world = scene.world or bpy.data.worlds.new("ArtGS World")
-    scene.world.color = (0.05, 0.05, 0.05)
-    sys.stdout.flush()
-    saved = os.dup(1)
-    try:  # Cycles logs every render phase on the C stdout: keep the script's output readable
-        with open(os.devnull, "wb") as devnull:
-            os.dup2(devnull.fileno(), 1)
-            bpy.ops.render.render(write_still=True)
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-    print(f"preview rendered: {path}", flush=True)
+def contact_sheet(module: str, capture: Path, out: Path, width: int,
+                  panels: Path | None) -> None:
+    """OUT/preview.png: the engine's labelled contact sheet of every stage's result
+    (``artgs contact-sheet``), with the interpreter the add-on uses."""
+    engine = sys.modules[f"{module}.artgs_addon.preferences"].engine_python()
+    argv = [engine, "-m", "artgs", "contact-sheet", str(out), "--capture", str(capture),
+            "--width", str(width), "--quiet"] + (["--panels", str(panels)] if panels else [])
+    proc = subprocess.run(argv, capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.exit(f"error: contact sheet failed: {proc.stderr.strip().splitlines()[-1:]}")
+    print(f"preview: {out / 'preview.png'}", flush=True)
 
 
 def run(args: argparse.Namespace, module: str) -> None:
@@ -119,15 +106,8 @@ def run(args: argparse.Namespace, module: str) -> None:
     run_stage("propose bones", bpy.ops.artgs.propose_bones)
     for stage in ("capture", "splat", "bones"):
         print(f"  {stage}: {settings.stage(stage).text}")
-    # Render from the first capture camera, showing the splat preview (not the capture's points).
-    capture_points = [o for o in scene.objects if o.type == "MESH" and o != settings.splat_object]
-    for obj in capture_points:
-        obj.hide_render = True
-    render_preview(scene, out / "preview.png", args.preview_size)
-    for obj in capture_points:
-        obj.hide_render = False
+    contact_sheet(module, capture, out, args.preview_size, args.panels)
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "scene.blend"))
-    print(f"preview: {out / 'preview.png'}")
     print(f"scene: {out / 'scene.blend'}")
 
 

@@ -8,6 +8,7 @@ The whole pipeline through the operators runs in tests/test_addon_pipeline.py (a
 from __future__ import annotations
 
 import json
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -24,10 +25,10 @@ from artgs.artgs_addon.capture_scene import camera_object, pixel_aspect  # noqa:
 from artgs.artgs_addon.pointcloud import srgb_to_linear  # noqa: E402
 from artgs.artgs_addon.splat_preview import SH_C0  # noqa: E402
 from artgs.core.model.cameras import Camera, intrinsics, look_at  # noqa: E402
-from artgs.core.model.capture import load_capture  # noqa: E402
 from artgs.core.model.joints import read_articulation  # noqa: E402
 from artgs.core.model.ply import SplatArrays, write_ply  # noqa: E402
-from artgs.core.synth.generate import generate_object  # noqa: E402
+from engine_env import engine_json, engine_python  # noqa: E402
+from engine_env import generate_capture as generate_object  # noqa: E402
 from artgs.operators.propose import ARTGS_OT_propose_bones  # noqa: E402
 
 ADDON = "artgs"
@@ -146,26 +147,38 @@ def test_polls_need_their_inputs(scene, tmp_path, capture):
     assert ops.import_splat.poll()
 
 
+_CAPTURE_FACTS = """
+import numpy as np
+from artgs.core.model.capture import load_capture
+cap = load_capture({capture!r})
+result = {{
+    "static": [{{"file_path": f.file_path, "c2w": f.camera.c2w.tolist(), "K": f.camera.K.tolist()}}
+               for f in cap.static],
+    "interaction_cameras": len({{tuple(np.round(f.camera.c2w, 6).ravel()) for f in cap.interaction}}),
+    "points": sum(int(np.count_nonzero((f.depth > 0) & f.mask)) for f in cap.static),
+}}
+"""
+
+
 def test_import_capture_cameras_and_points(scene, capture):
     scene.artgs.capture_dir = str(capture)
     assert bpy.ops.artgs.import_capture() == {"FINISHED"}
-    cap = load_capture(capture)
+    cap = engine_json(_CAPTURE_FACTS.format(capture=str(capture)))  # images decode in the engine
     collection = bpy.data.collections[capture.name]
     cams = [o for o in collection.objects if o.type == "CAMERA"]
-    interaction_cams = {tuple(np.round(f.camera.c2w, 6).ravel()) for f in cap.interaction}
-    assert len(cams) == len(cap.static) + len(interaction_cams)
+    assert len(cams) == len(cap["static"]) + cap["interaction_cameras"]
     render = scene.render
     assert (render.resolution_x, render.resolution_y) == (64, 48)
     aspect = (render.pixel_aspect_x, render.pixel_aspect_y)
     by_name = {o["artgs_frame"]: o for o in cams}
-    for f in cap.static:
-        obj = by_name[f.file_path]
-        np.testing.assert_allclose(np.array(obj.matrix_world), f.camera.c2w, atol=1e-5)
-        np.testing.assert_allclose(_blender_K(obj, 64, 48, aspect), f.camera.K, rtol=1e-6,
+    for f in cap["static"]:
+        obj = by_name[f["file_path"]]
+        np.testing.assert_allclose(np.array(obj.matrix_world), f["c2w"], atol=1e-5)
+        np.testing.assert_allclose(_blender_K(obj, 64, 48, aspect), f["K"], rtol=1e-6,
                                    atol=1e-6 * 64)
     points = [o for o in collection.objects if o.type == "MESH"]
     assert len(points) == 1
-    expected = sum(int(np.count_nonzero((f.depth > 0) & f.mask)) for f in cap.static)
+    expected = cap["points"]
     assert len(points[0].data.vertices) == expected
     assert scene.artgs.capture.status == "DONE"
     assert f"{len(cams)} cameras, {expected} of {expected} points" in scene.artgs.capture.message
@@ -253,8 +266,9 @@ def test_import_splat_points_and_colours(scene, tmp_path):
 
 
 def test_sh_constant_matches_the_engine():
-    from artgs.core.render.sh import C0
-
+    code = "from artgs.core.render.sh import C0; print(repr(C0))"
+    C0 = float(subprocess.run([engine_python(), "-c", code], capture_output=True, text=True,
+                              check=True).stdout)
     assert SH_C0 == pytest.approx(C0, abs=1e-15)
 
 
@@ -398,3 +412,28 @@ def test_check_engine_reports_what_it_found(scene, tmp_path):
     with pytest.raises(RuntimeError, match="No module named artgs"):
         bpy.ops.artgs.check_engine()
     assert str(engine) in preferences.last_check[-1]
+
+
+def test_bad_splat_is_reported_in_blender_as_on_the_command_line(scene, tmp_path, capture):
+    """Issue 13: the engine's one-line refusal (file, element, field) reaches Blender's report
+    area through the worker unchanged, and OUT keeps its earlier proposals."""
+    from artgs.core.model.ply import SplatArrays, write_ply
+    out = tmp_path / "out"
+    n = 20
+    rng = np.random.default_rng(0)
+    splat = SplatArrays(means=rng.normal(size=(n, 3)).astype(np.float32),
+                        quats=np.tile(np.float32([1, 0, 0, 0]), (n, 1)),
+                        log_scales=np.full((n, 3), -4, np.float32),
+                        opacity_logits=np.zeros(n, np.float32), sh=np.zeros((n, 1, 3), np.float32))
+    splat.means[11, 2] = np.inf
+    write_ply(out / "splat.ply", splat)
+    (out / "proposals.json").write_text('{"frame": "world", "joints": [], "source": "user"}\n')
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    scene.artgs.capture_dir, scene.artgs.output_dir = str(capture), str(out)
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.artgs.propose_bones()
+    message = scene.artgs.bones.message
+    assert scene.artgs.bones.status == "FAILED"
+    assert str(out / "splat.ply") in message and "vertex[11]" in message and "field 'z'" in message
+    assert message in str(err.value) and "Traceback" not in str(err.value)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from artgs.core.model.joints import read_articulation
-from artgs.core.synth.generate import generate_object
+from engine_env import generate_capture as generate_object
 
 pytest.importorskip("bpy")
 ROOT = Path(__file__).resolve().parent.parent
@@ -57,7 +57,8 @@ def test_headless_pipeline(tmp_path):
     driver = _DRIVER.format(script=str(ROOT / "scripts" / "headless_pipeline.py"),
                             blend=str(out / "scene.blend"), heavy=HEAVY)
     proc = subprocess.run([sys.executable, "-c", driver, str(capture), str(out),
-                           "--iterations", "10", "--preview-size", "160"],
+                           "--iterations", "10", "--preview-size", "160",
+                           "--panels", str(out / "stages")],
                           capture_output=True, text=True, timeout=600, cwd=tmp_path)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("CHECK ")]
     assert lines, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -75,11 +76,39 @@ def test_headless_pipeline(tmp_path):
     assert check["cameras"] >= 6 and check["splat"]
     assert check["states"] == {"capture": "DONE", "splat": "DONE", "bones": "DONE"}
 
-    import cv2
+    # preview.png: the labelled contact sheet, 2x2 panels of 160x120 under 18-pixel labels
+    sheet = read_png(out / "preview.png")
+    tile_h, tile_w, gap = 18 + 120, 160, 4
+    assert sheet.shape == (2 * tile_h + 3 * gap, 2 * tile_w + 3 * gap, 3)
+    tiles = {}
+    for k, name in enumerate(("capture", "splat", "joints", "posed")):
+        r, c = divmod(k, 2)
+        y, x = gap + r * (tile_h + gap), gap + c * (tile_w + gap)
+        tiles[name] = sheet[y:y + tile_h, x:x + tile_w]
+        assert np.array_equal(tiles[name], read_png(out / "stages" / f"{name}.png")), name
+        label, image = tiles[name][:18], tiles[name][18:]
+        assert (label.max(axis=2) > 150).mean() > 0.02, name  # the label's text is there
+        background = np.median(image.reshape(-1, 3), axis=0)
+        differs = np.abs(image.astype(int) - background).sum(axis=2) > 30
+        assert 0.03 < differs.mean() < 0.95, name  # the object covers a real part of the panel
+    # parts coloured: the joints panel has strongly saturated pixels, the plain splat far fewer
+    saturation = {n: (t[18:].max(axis=2).astype(int) - t[18:].min(axis=2)) > 120
+                  for n, t in tiles.items()}
+    assert saturation["joints"].mean() > 3 * saturation["splat"].mean() + 0.005
+    # posed open: parts moved, so the picture differs from the splat at rest
+    assert np.abs(tiles["posed"].astype(int) - tiles["splat"]).sum(axis=2).mean() > 3
 
-    img = cv2.imread(str(out / "preview.png"))
-    assert img.shape[:2] == (120, 160)
-    background = np.median(img.reshape(-1, 3), axis=0)
-    # The object covers a real part of the image and is not background-coloured.
-    differs = np.abs(img.astype(int) - background).sum(axis=2) > 30
-    assert 0.03 < differs.mean() < 0.9
+
+def read_png(path: Path) -> np.ndarray:
+    """An 8-bit PNG as (H,W,3) uint8, top row first (read by Blender: no OpenCV here)."""
+    import bpy
+
+    img = bpy.data.images.load(str(path))
+    try:
+        w, h = img.size
+        px = np.empty(w * h * img.channels, np.float32)
+        img.pixels.foreach_get(px)
+    finally:
+        bpy.data.images.remove(img)
+    rgb = px.reshape(h, w, -1)[::-1, :, :3]
+    return (rgb * 255 + 0.5).astype(np.uint8)

@@ -20,7 +20,7 @@ from artgs.core.model.ply import write_ply
 from artgs.core.model.progress import QUIET
 from artgs.core.model.registry import ProposeOptions
 from artgs.core.stages.propose.stage import propose
-from artgs.core.stages.propose.motion import propose_motion
+from artgs.core.stages.propose.motion.route import propose_motion
 from artgs.core.stages.reconstruct import initial_splats
 from artgs.core.synth.generate import generate_object
 

@@ -16,8 +16,11 @@ from artgs.core.model.errors import Cancelled, InputError
 from artgs.core.model.ply import read_ply
 from artgs.core.model.progress import QUIET, Progress
 from artgs.core.render.cpu.project import quat_to_rotmat
-from artgs.core.stages.reconstruct import (ReconstructConfig, Trainer, evaluate, holdout_indices,
-                                    initial_splats, make_view, reconstruct)
+from artgs.core.stages.reconstruct import (ReconstructConfig, Trainer, holdout_indices,
+                                           initial_splats, reconstruct)
+from artgs.core.train.evaluate import evaluate
+from artgs.core.train.params import splat_params
+from artgs.core.train.views import make_view
 from artgs.core.synth.generate import generate_object
 from artgs.core.synth.objects import box_distance, random_spec
 
@@ -71,10 +74,7 @@ def test_reconstruction_quality_and_output(capture, tmp_path):
     splat = read_ply(tmp_path / layout.SPLAT)
     assert len(splat) == fig["gaussians"] and splat.degree == 1
     # the written splat renders the held-out views as evaluated
-    params = {"means": splat.means, "quats": splat.quats, "log_scales": splat.log_scales,
-              "opacity_logits": splat.opacity_logits, "sh0": splat.sh[:, :1],
-              "shN": splat.sh[:, 1:]}
-    params = {k: torch.as_tensor(v) for k, v in params.items()}
+    params = splat_params(splat)
     views = [make_view(i, capture.static[i], torch.device("cpu")) for i in (2, 7)]
     ev = evaluate(params, views, "auto")
     assert ev["psnr"] == pytest.approx(fig["holdout_psnr"], abs=1e-3)

@@ -282,7 +282,7 @@ def test_client_error_is_not_retried_and_names_endpoint_status_and_body():
 
 def test_timeout_and_unreachable_and_bad_body_errors():
     with FakeVlm(lambda body: (200, completion("late"), 1.0)) as fake:
-        with pytest.raises(ArtgsError, match="no answer within 0.2 s"):
+        with pytest.raises(ArtgsError, match="no complete answer within 0.2 s"):
             chat(cfg(fake.endpoint, timeout=0.2, retries=3, backoff=0.0), [user_message("hi")])
         time.sleep(0.1)  # a retry would have arrived by now
         assert len(fake.requests) == 1  # a timed-out request is not repeated

@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from artgs.artgs_addon.worker import CANCELLED, Worker, parse_line, worker_command
+from artgs.artgs_addon.worker import Worker, parse_line, worker_command
 from artgs.core.cli import check_env
+from artgs.core.model.protocol import EXIT_CANCELLED as CANCELLED
 from artgs.core.model import envcheck
 from artgs.core.model.progress import Progress
 

@@ -28,8 +28,8 @@ from ..model.registry import ProposeOptions
 from .options import BenchProposeOptions
 
 
-def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0
-                  ) -> dict:
+def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0,
+                  robot_twin: bool = True) -> dict:
     """Propose joints for one synthetic capture and score them against its gt.json.
 
     The static splat is the depth-initialised one, or optimised for ``iterations`` iterations.
@@ -46,7 +46,8 @@ def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iteration
     else:
         write_ply(out / "splat.ply", initial_splats(capture.static)[0])
     t0 = time.perf_counter()
-    art = propose(capture, out, QUIET, ProposeOptions(method="motion", device=device))
+    art = propose(capture, out, QUIET, ProposeOptions(method="motion", device=device,
+                                                      robot_twin=robot_twin))
     seconds = time.perf_counter() - t0
     scores = match_joints(art.joints, gt.joints)
     return {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name),
@@ -104,20 +105,39 @@ def bench_propose(args: BenchProposeOptions, progress: Progress) -> int:
                                     progress, width=args.width, height=args.height,
                                     depth_noise=args.depth_noise,
                                     simultaneous=args.simultaneous)
+        variants = [("", captures, True)]
+        if args.robot and not args.data:
+            robot_set = generate_set(tmp / "robot", args.category, args.per_category, args.seed,
+                                     progress, width=args.width, height=args.height,
+                                     depth_noise=args.depth_noise,
+                                     simultaneous=args.simultaneous, robot=args.robot)
+            variants += [(f"{args.robot} in view, with its twin", robot_set, True),
+                         (f"{args.robot} in view, without the twin (ablation)", robot_set, False)]
         progress.start("bench-propose", f"{len(captures)} captures")
-        results = []
-        for k, cap in enumerate(captures):
-            r = bench_capture(Path(cap), tmp / "out", args.device, args.iterations)
-            results.append(r)
-            worst = max((s["ae"] for s in r["scores"]), default=0.0)
-            progress.update("bench-propose", (k + 1) / len(captures), r["capture"],
-                            seconds=round(r["seconds"], 1), worst_ae=round(worst, 2))
-        rows = summarize(results)
+        tables = []
+        n = sum(len(c) for _, c, _ in variants)
+        done = 0
+        for title, caps, twin in variants:
+            results = []
+            for cap in caps:
+                r = bench_capture(Path(cap), tmp / f"out{done}", args.device, args.iterations,
+                                  robot_twin=twin)
+                results.append(r)
+                done += 1
+                worst = max((s["ae"] for s in r["scores"]), default=0.0)
+                progress.update("bench-propose", done / n, r["capture"],
+                                seconds=round(r["seconds"], 1), worst_ae=round(worst, 2))
+            tables.append((title, summarize(results), results))
         progress.finish("bench-propose", captures=len(captures))
     if progress.mode == "json":
-        progress.finished(rows=json.dumps(rows), results=json.dumps(results))
+        progress.finished(**{f"rows{k or ''}": json.dumps(rows)
+                             for k, (_, rows, _) in enumerate(tables)},
+                          results=json.dumps(tables[0][2]))
     else:
         print(f"depth noise {args.depth_noise} m, simultaneous {args.simultaneous}, "
               f"splat iterations {args.iterations}, {len(captures)} captures")
-        print(format_table(rows))
+        for title, rows, _ in tables:
+            if title:
+                print(f"\n{title}:")
+            print(format_table(rows))
     return 0

@@ -18,9 +18,9 @@ import time
 import numba
 import numpy as np
 import torch
-from numba import njit
 
 from ..render.cpu import blend_kernels as rk
+from ..render.cpu.jit import kernel
 from ..render.cpu.project import project
 from ..render.rasterize import rasterize
 from ..render.sh import rgb_to_sh0
@@ -46,7 +46,7 @@ def shell_scene(n: int, size: int, seed: int = 0):
     return [means, quats, log_scales, torch.log(op / (1 - op)), sh], K, np.eye(4)
 
 
-@njit(cache=True)
+@kernel
 def _count_pairs(feats, offsets, ids, width, height):
     """Gaussian-pixel pairs blended by the forward kernel (same rules)."""
     tw, th = rk.TILE_W, rk.TILE_H

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 
 from ..model import protocol, registry
-from ..model.errors import ArtgsError, Cancelled, InputError
+from ..model.errors import ArtgsError, InputError
+from ..model.interrupt import cancel_on_signals, ignore_further_interrupts, interrupted
 from ..model.progress import Progress
-from . import bench, capture_preview, check_env, run, stage, synth, validate
+from . import batch, bench, capture_preview, check_env, contact_sheet, run, stage, synth, validate
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -37,17 +37,14 @@ def build_parser() -> argparse.ArgumentParser:
     """The full argument parser (also used by the docs test)."""
     parser = argparse.ArgumentParser(prog="artgs", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (synth, validate, capture_preview, run):
+    for module in (synth, validate, capture_preview, run, batch):
         _tool(sub, module)
     for spec in registry.STAGES:
         _common(stage.add_parser(sub, spec))
     _tool(sub, check_env)
+    _tool(sub, contact_sheet)
     bench.add_parsers(sub, _common)
     return parser
-
-
-def _terminate(signum, frame) -> None:  # noqa: ARG001
-    raise KeyboardInterrupt
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,18 +55,31 @@ def main(argv: list[str] | None = None) -> int:
     # torch's OpenMP threads busy-wait between ops and starve the numba rasterizer's threads
     # (measured up to 10x slower on 2 cores); must be set before torch is imported.
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    signal.signal(signal.SIGTERM, _terminate)
+    with cancel_on_signals():
+        return _run(args, progress)
+
+
+def _run(args: argparse.Namespace, progress: Progress) -> int:
+    """Run the command; map errors to exit codes and one line of message."""
     try:
         code = args.handler(args, progress)
-    except InputError as exc:
-        progress.error(str(exc))
-        return protocol.EXIT_BAD_INPUT
-    except (KeyboardInterrupt, Cancelled):
-        progress.error("cancelled")
-        return protocol.EXIT_CANCELLED
-    except ArtgsError as exc:
-        progress.error(str(exc))
-        return protocol.EXIT_FAILED
+    except BaseException as exc:   # noqa: BLE001 - a cancel can surface as any exception type
+        ignore_further_interrupts()   # a second Ctrl-C must not turn this report into a traceback
+        if isinstance(exc, InputError):
+            progress.error(str(exc))
+            return protocol.EXIT_BAD_INPUT
+        if interrupted(exc):
+            progress.error("cancelled; the interrupted stage changed no file")
+            return protocol.EXIT_CANCELLED
+        if isinstance(exc, ArtgsError):
+            progress.error(str(exc))
+            return protocol.EXIT_FAILED
+        if isinstance(exc, OSError) and exc.strerror:   # disk full, permissions changed, ...
+            where = f"{exc.filename}: " if exc.filename else ""
+            progress.error(f"{where}{exc.strerror}; files in the output folder are as before "
+                           "the failed write")
+            return protocol.EXIT_FAILED
+        raise
     return int(code or 0)
 
 

@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..model.capture import load_capture
-from ..model.capture_preview import write_preview
 from ..model.errors import InputError
 from ..model.progress import Progress
 
@@ -22,6 +20,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, progress: Progress) -> int:
+    # numpy: imported when the command runs, so check-env works without it
+    from ..model.capture import load_capture
+    from ..model.capture_preview import write_preview
+
     if args.max_points < 1:
         raise InputError("--max-points", f"must be at least 1, not {args.max_points}")
     progress.start("capture", "reading the capture")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from ..model.capture import load_capture, summarize
 from ..model.progress import Progress
 
 NAME = "validate"
@@ -16,6 +15,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, progress: Progress) -> int:
+    from ..model.capture import load_capture, summarize  # numpy: only when the command runs (check-env works without it)
+
     summary = summarize(load_capture(args.capture))
     if progress.mode == "text":
         s = summary

@@ -6,12 +6,12 @@
   the valid depths in a small window (robust at depth edges), back-project, drop samples off the
   part's plane, PCA; the dominant direction is the axis and the mean of the samples a point on it.
   When the dominant eigenvalue does not dominate (too few points, a bent or blob-like set) the 2D
-  segment is lifted onto the part's plane instead. An axis within :data:`SNAP_DEG` of plumb or level
-  is snapped to it (:func:`snap_axis`). The sign makes a positive angle open the part towards the
-  camera.
+  segment is lifted onto the part's plane instead. An axis within :data:`AXIS_SNAP_DEG` of plumb or
+  level is snapped to it (:func:`snap_axis`). The sign makes a positive angle open the part
+  towards the camera.
 - Prismatic: the cross product of the box's horizontal and vertical edge directions in 3D (the box
   edges' midpoints lifted onto the part's plane), pointing towards the camera (pulling out), made
-  level when within :data:`SNAP_DEG` of it.
+  level when within :data:`AXIS_SNAP_DEG` of it.
 - Handle: the 3D centre of the handle box's pixels (those standing out of the part's plane if
   any), approached along minus the part's normal.
 - Extent: the part box's corners lifted onto the plane, a thin oriented box around the front
@@ -29,7 +29,7 @@ from ..model.cameras import Camera
 FRONT_MARGIN = 0.05  # m in front of the part's plane kept in its extent (handles)
 BACK_MARGIN = 0.02   # m behind it
 DOMINANCE = 20.0     # first PCA eigenvalue over the second for a trusted hinge direction
-SNAP_DEG = 8.0       # an axis this close to level or plumb (within the part's plane) is snapped
+AXIS_SNAP_DEG = 8.0  # a joint axis this close to level or plumb (in the part's plane) is snapped
 _SHRINK = 0.12       # fraction of the box trimmed on each side before fitting the plane
 
 
@@ -145,7 +145,7 @@ def revolute_axis(camera: Camera, depth: np.ndarray, points: np.ndarray, plane: 
 
 
 def snap_axis(axis: np.ndarray, normal: np.ndarray, up: np.ndarray, kind: str,
-              max_deg: float = SNAP_DEG) -> np.ndarray:
+              max_deg: float = AXIS_SNAP_DEG) -> np.ndarray:
     """Furniture prior: hinges run plumb or level along the part's front, drawers slide level.
 
     ``axis`` is replaced by the nearest such direction (same sign) if within ``max_deg``:
@@ -202,7 +202,7 @@ def prismatic_axis(camera: Camera, box: np.ndarray, plane: Plane) -> np.ndarray:
 
 
 def extent(camera: Camera, box: np.ndarray, plane: Plane) -> dict[str, list]:
-    """The part's oriented box (``core.joints`` ``extent``): front rectangle, thin in depth."""
+    """The part's oriented box (``model.joints`` ``extent``): front rectangle, thin in depth."""
     center, h, v, size = box_frame(camera, box, plane)
     n = plane.normal
     v = _unit(v - (v @ h) * h)

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
+
+#: Names of :func:`atomic_path`'s temporary files: ``.{stem}.{mkstemp's 8 characters}.tmp{suffix}``.
+_TMP_NAME = re.compile(r"^\..*\.[A-Za-z0-9_]{8}\.tmp(\.[^.]*)?$")
 
 
 @contextmanager
@@ -29,6 +33,20 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
+
+
+def remove_stale_temporaries(folder: str | Path) -> list[Path]:
+    """Remove temporary files a killed writer left in ``folder`` and its sub-folders.
+
+    Only call this while holding the folder's lock (core/model/lock.py): a live writer's
+    temporary file looks the same. Returns the removed paths.
+    """
+    removed = []
+    for path in sorted(Path(folder).rglob(".*.tmp*")):
+        if _TMP_NAME.match(path.name) and path.is_file():
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
 
 
 def _umask() -> int:

@@ -30,3 +30,7 @@ class InputError(ArtgsError):
 
 class Cancelled(ArtgsError):
     """The user cancelled a long stage."""
+
+
+class NothingFound(ArtgsError):
+    """A stage ran but found nothing to write; earlier outputs are left as they were."""

@@ -13,15 +13,33 @@ from .jsonio import read_json_object
 SPLAT = "splat.ply"
 PROPOSALS = "proposals.json"
 ARTICULATION = "articulation.json"
+PART_LABELS = "part_labels.npy"   # int32 part of every splat.ply Gaussian: 0 base, k = joint k
 PARTS_DIR = "parts"
 URDF = "model.urdf"
 REPORT = "report.json"
 
 
 def read_report(out: str | Path) -> dict[str, Any]:
-    """The run's report (empty if none yet)."""
+    """The run's report (empty if none yet); InputError naming the key when it is malformed."""
     path = Path(out) / REPORT
-    return read_json_object(path) if path.is_file() else {}
+    if not path.exists():
+        return {}
+    report = read_json_object(path)
+    hint = "; fix it or delete report.json (the next stage starts a new one)"
+    capture = report.get("capture")
+    if capture is not None and (not isinstance(capture, str) or not capture):
+        raise InputError(path, f"must be the capture folder's path (a string), not {capture!r}"
+                         + hint, field="capture")
+    stages = report.get("stages")
+    if stages is not None:
+        if not isinstance(stages, dict):
+            raise InputError(path, f"must be an object of stage entries, not {stages!r}" + hint,
+                             field="stages")
+        for name, entry in stages.items():
+            if not isinstance(entry, dict):
+                raise InputError(path, f"must be an object, not {entry!r}" + hint,
+                                 field=f"stages.{name}")
+    return report
 
 
 def update_report(out: str | Path, stage: str | None = None, **fields: Any) -> dict[str, Any]:

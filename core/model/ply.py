@@ -33,6 +33,8 @@ _FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None
 _REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
              "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
 _HEADER_LIMIT = 1 << 16
+#: Largest log scale a Gaussian may have: exp(2 s) (its variance) must stay finite in float32.
+_MAX_LOG_SCALE = 40.0
 
 
 @dataclass
@@ -57,6 +59,29 @@ class SplatArrays:
         """SH degree (0..3)."""
         return int(round(np.sqrt(self.sh.shape[1]))) - 1
 
+    def first_invalid(self) -> tuple[str, int, int, str] | None:
+        """The first value no splat can hold, as (array, Gaussian, column, why), else None:
+        a non-finite number, a zero quaternion (no rotation; column 0), or a log scale whose
+        variance ``exp(2 s)`` overflows float32."""
+        arrays = {"means": self.means, "quats": self.quats, "log_scales": self.log_scales,
+                  "opacity_logits": self.opacity_logits.reshape(-1, 1),
+                  "sh": self.sh.reshape(len(self), 3 * self.sh.shape[1])}
+        for name, a in arrays.items():
+            bad = ~np.isfinite(a)
+            if bad.any():
+                row, col = np.argwhere(bad)[0]
+                return name, int(row), int(col), f"is {a[row, col]} (not a finite float32)"
+        zero = ~(np.abs(self.quats) > 0).any(axis=1)
+        if zero.any():
+            return ("quats", int(np.argmax(zero)), 0,
+                    "is the zero quaternion (rot_0..rot_3 all 0), which is no rotation")
+        big = self.log_scales > _MAX_LOG_SCALE
+        if big.any():
+            row, col = np.argwhere(big)[0]
+            return ("log_scales", int(row), int(col), f"has log scale {self.log_scales[row, col]:g}"
+                    f" > {_MAX_LOG_SCALE:g} (its covariance overflows float32)")
+        return None
+
     def validate(self) -> None:
         """Raise ValueError if the array shapes do not fit together."""
         n = self.means.shape[0]
@@ -73,13 +98,20 @@ class SplatArrays:
 
 
 def write_ply(path: str | Path, splats: SplatArrays) -> None:
-    """Write ``splats`` to ``path`` in the standard 3DGS layout, atomically."""
+    """Write ``splats`` to ``path`` in the standard 3DGS layout, atomically.
+
+    Raises ValueError (before touching ``path``) for values :func:`read_ply` would refuse.
+    """
     splats.validate()
+    invalid = splats.first_invalid()
+    if invalid is not None:
+        name, row, col, why = invalid
+        raise ValueError(f"SplatArrays.{name}[{row}, {col}] {why}")
     n, k = len(splats), splats.sh.shape[1]
     names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
     names += [f"f_rest_{i}" for i in range(3 * (k - 1))]
     names += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
-    rest = np.transpose(splats.sh[:, 1:, :], (0, 2, 1)).reshape(n, -1)  # channel-major
+    rest = np.transpose(splats.sh[:, 1:, :], (0, 2, 1)).reshape(n, 3 * (k - 1))  # channel-major
     columns = np.concatenate([
         splats.means.reshape(n, 3), np.zeros((n, 3), np.float32), splats.sh[:, 0, :], rest,
         splats.opacity_logits.reshape(n, 1), splats.log_scales.reshape(n, 3),
@@ -105,6 +137,9 @@ def read_ply(path: str | Path) -> SplatArrays:
         raise InputError(path, "no 'vertex' element in the PLY header", field="vertex")
     _, count, props = vertex
     names = [name for name, _ in props]
+    duplicate = next((name for i, name in enumerate(names) if name in names[:i]), None)
+    if duplicate is not None:
+        raise InputError(path, f"vertex property '{duplicate}' is declared twice", field=duplicate)
     for name in _REQUIRED:
         if name not in names:
             raise InputError(path, f"missing vertex property '{name}' (not a 3DGS splat file?)",
@@ -119,6 +154,8 @@ def read_ply(path: str | Path) -> SplatArrays:
     for i in range(n_rest):
         if f"f_rest_{i}" not in names:
             raise InputError(path, f"missing vertex property 'f_rest_{i}'", field=f"f_rest_{i}")
+    if count == 0:
+        raise InputError(path, "holds no Gaussians (element vertex 0)", field="vertex")
     table = structured_to_unstructured(_read_vertex(path, fmt, elements, header_len),
                                        dtype=np.float32)
     column = {name: i for i, name in enumerate(names)}
@@ -132,9 +169,24 @@ def read_ply(path: str | Path) -> SplatArrays:
     if n_rest:
         rest = cols(*[f"f_rest_{i}" for i in range(n_rest)]).reshape(count, 3, k - 1)
         sh[:, 1:] = np.transpose(rest, (0, 2, 1))
-    return SplatArrays(means=cols("x", "y", "z"), quats=cols("rot_0", "rot_1", "rot_2", "rot_3"),
-                       log_scales=cols("scale_0", "scale_1", "scale_2"),
-                       opacity_logits=table[:, column["opacity"]].copy(), sh=sh)
+    splats = SplatArrays(means=cols("x", "y", "z"), quats=cols("rot_0", "rot_1", "rot_2", "rot_3"),
+                         log_scales=cols("scale_0", "scale_1", "scale_2"),
+                         opacity_logits=table[:, column["opacity"]].copy(), sh=sh)
+    invalid = splats.first_invalid()
+    if invalid is not None:
+        array, row, col, why = invalid
+        raise InputError(path, f"element vertex[{row}] {why}", field=_field_name(array, col, k))
+    return splats
+
+
+def _field_name(array: str, col: int, k: int) -> str:
+    """The PLY property holding column ``col`` of SplatArrays' ``array`` (K SH coefficients)."""
+    if array == "sh":
+        coeff, channel = divmod(col, 3)
+        return f"f_dc_{channel}" if coeff == 0 else f"f_rest_{channel * (k - 1) + coeff - 1}"
+    return {"means": ("x", "y", "z"), "quats": tuple(f"rot_{i}" for i in range(4)),
+            "log_scales": tuple(f"scale_{i}" for i in range(3)),
+            "opacity_logits": ("opacity",)}[array][col]
 
 
 def _read_header(path: Path, f) -> tuple[str, list, int]:
@@ -190,6 +242,10 @@ def _read_vertex(path: Path, fmt: str, elements: list, header_len: int) -> np.nd
     count, props = next((c, p) for n, c, p in elements if n == "vertex")
     if endian is None:
         dtype = np.dtype([(p, kind) for p, kind in props])
+        size = path.stat().st_size - header_len
+        if count * len(props) * 2 > size:   # each value takes at least a digit and a separator
+            raise InputError(path, f"file is truncated: {size} bytes of ASCII data cannot hold "
+                             f"the {count} vertices the header promises", field="vertex")
         with open(path, "rb") as f:
             f.seek(header_len)
             try:

@@ -13,6 +13,7 @@ from typing import Any, Callable, TextIO
 
 from . import protocol as P
 from .errors import Cancelled
+from .interrupt import cancel_requested
 
 MODES = ("text", "json", "quiet")
 
@@ -91,8 +92,8 @@ class Progress:
             self._emit({P.EVENT: P.FINISHED, "outputs": _plain(outputs)})
 
     def check_cancel(self) -> None:
-        """Raise :class:`Cancelled` if the cancel callback says so."""
-        if self.cancel is not None and self.cancel():
+        """Raise :class:`Cancelled` after Ctrl-C/SIGTERM or when the cancel callback says so."""
+        if cancel_requested() or (self.cancel is not None and self.cancel()):
             raise Cancelled("cancelled by the user")
 
 

@@ -34,6 +34,15 @@ def option(default: Any, help: str, **meta: Any) -> Any:  # noqa: A002 - argpars
     return field(default=default, metadata={"help": help, **meta})
 
 
+#: Default working resolution (longer image side, pixels): what 2 CPU cores reconstruct in minutes.
+MAX_SIDE = 640
+
+
+def _max_side() -> Any:
+    return option(MAX_SIDE, "working resolution: frames whose longer side is larger are shrunk "
+                  "to this many pixels on load, intrinsics scaled (0: as captured)", shared=True)
+
+
 def _device() -> Any:
     return option("auto", "where torch work runs (auto: CUDA with gsplat if available, else CPU)",
                   choices=DEVICES, shared=True)
@@ -46,6 +55,12 @@ class ReconstructOptions:
     iterations: int | None = option(None, "iteration cap (default: until converged)")
     holdout: int = option(0, "static views held out for evaluation")
     device: str = _device()
+    max_side: int = _max_side()
+
+
+def _robot_twin() -> Any:
+    return option(True, "explain the robot arm's pixels by its twin (the robot's Gaussians posed "
+                  "by robot_joint_positions); --no-robot-twin for the ablation", shared=True)
 
 
 @dataclass
@@ -58,10 +73,25 @@ class ProposeOptions:
                                       "http://127.0.0.1:8000/v1 (default: $ARTGS_VLM_ENDPOINT)",
                                       shared=True)
     vlm_model: str | None = option(None, "model name (default: $ARTGS_VLM_MODEL)", shared=True)
-    vlm_timeout: float = option(60.0, "seconds per request", shared=True)
-    robot_twin: bool = option(True, "explain the robot arm's pixels by its twin (the robot's "
-                              "Gaussians posed by robot_joint_positions); --no-robot-twin for the "
-                              "ablation", shared=True)
+    vlm_timeout: float = option(60.0, "seconds for each VLM request, retries included",
+                                shared=True)
+    max_side: int = _max_side()
+    robot_twin: bool = _robot_twin()
+
+
+@dataclass
+class OptimiseOptions:
+    """Options of ``artgs optimise``."""
+
+    iterations: int = option(300, "steps of the main fit (the later phases take fractions of it)")
+    types: bool = option(True, "choose each joint's type by fitting both hypotheses (--no-types: "
+                         "keep the proposals' types)")
+    parts: bool = option(True, "remove parts the frames do not show moving (--no-parts: keep "
+                         "every proposed part)")
+    seed: int = option(0, "random seed of the frame sampling")
+    device: str = _device()
+    max_side: int = _max_side()
+    robot_twin: bool = _robot_twin()
 
 
 @dataclass(frozen=True)
@@ -86,6 +116,11 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec("propose", "Bones", "initial joints -> OUT/proposals.json",
               reads=(layout.SPLAT,), writes=(layout.PROPOSALS,), options=ProposeOptions,
               run="stages.propose.stage:run", check="stages.propose.stage:check"),
+    StageSpec("optimise", "Optimise", "fit joints, states and parts to the interaction frames "
+              "-> OUT/articulation.json, OUT/part_labels.npy",
+              reads=(layout.SPLAT, layout.PROPOSALS),
+              writes=(layout.ARTICULATION, layout.PART_LABELS), options=OptimiseOptions,
+              run="stages.optimise.stage:run", check="stages.optimise.stage:check"),
 )
 
 

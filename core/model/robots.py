@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,8 @@ class RobotModel:
 
     def full_positions(self, q) -> np.ndarray:
         """``q`` (arm-only or full) as a full actuated-joint vector (gripper joint 0 if missing)."""
+        import numpy as np  # here: the CLI imports this module, and check-env runs without numpy
+
         q = np.asarray(q, float)
         if len(q) == self.arm_joints:
             q = np.concatenate([q, np.zeros(len(self.joints) - self.arm_joints)])

@@ -4,8 +4,8 @@
 - The 2D covariance gets ``LOW_PASS`` px^2 added on its diagonal (3DGS's dilation, smaller than
   its 0.3: that minimum footprint spilled ~20 % alpha one pixel across depth edges and
   silhouettes, which dominated the held-out depth error on the benchmark).
-- The numba kernels freeze these constants when compiled and numba's cache does not see changes
-  here: after changing one, delete core/__pycache__/raster_*kernels*.nb[ic].
+- The numba kernels freeze these constants when compiled; their on-disk cache is keyed on the
+  values (core/render/cpu/jit.py), so a change here compiles them afresh.
 - The Jacobian of the projection is evaluated with x/z, y/z clamped to ``FOV_PAD`` beyond the
   image edges (as a fraction of the half field of view), as gsplat does.
 - A Gaussian touches a pixel centre only inside its ``SIGMA_CUTOFF`` sigma ellipse, i.e.

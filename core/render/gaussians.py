@@ -62,13 +62,25 @@ class Gaussians:
     @classmethod
     def from_arrays(cls, arrays: Any, device: torch.device | str = "cpu",
                     dtype: torch.dtype = torch.float32) -> "Gaussians":
-        """From a ``core.ply.SplatArrays`` (or any object with the same numpy attributes)."""
+        """From a ``core.model.ply.SplatArrays`` (or any object with the same numpy attributes)."""
         def t(name: str) -> torch.Tensor:
             return torch.as_tensor(np.asarray(getattr(arrays, name)), dtype=dtype, device=device)
         return cls(**{f.name: t(f.name) for f in fields(cls)})
 
     def to_arrays(self):
-        """As a ``core.ply.SplatArrays`` of float32 numpy arrays."""
+        """As a ``core.model.ply.SplatArrays`` of float32 numpy arrays."""
         from ..model.ply import SplatArrays
         return SplatArrays(**{f.name: getattr(self, f.name).detach().cpu().numpy()
                               .astype(np.float32) for f in fields(self)})
+
+
+def concat(*splats: Gaussians) -> Gaussians:
+    """Several splats as one (e.g. the object's and a robot twin's, rendered together); SH
+    coefficients are padded with zeros to the largest degree."""
+    k = max(g.sh.shape[1] for g in splats)
+
+    def pad(sh: torch.Tensor) -> torch.Tensor:
+        return torch.cat([sh, sh.new_zeros(sh.shape[0], k - sh.shape[1], 3)], 1)
+    return Gaussians(*(torch.cat([getattr(g, f) for g in splats]) for f in
+                       ("means", "quats", "log_scales", "opacity_logits")),
+                     torch.cat([pad(g.sh) for g in splats]))

@@ -10,17 +10,15 @@
    the masked image (L1 summed over the image, divided by the object pixels), ``+ depth L1``
    (the rasterizer's alpha-normalised expected depth, planar per Gaussian, vs the measured depth
    where measured and inside the mask, in units of 1% of the object size), ``+ alpha L1`` against
-   the mask (keeps the background empty); densify (clone/split on view-space gradient) and prune
-   (core/train/densify.py).
+   the mask (keeps the background empty) (core/train/losses.py); densify (clone/split on
+   view-space gradient) and prune (core/train/densify.py).
 3. Stop when the training loss plateaus (relative drop over a window below a tolerance) or at
-   the iteration cap; write OUT/splat.ply atomically (a cancel or crash leaves the previous one).
+   the iteration cap (core/train/loop.py); write OUT/splat.ply atomically (a cancel or crash
+   leaves the previous one).
 
-Held-out evaluation (``holdout`` = K evenly spaced static views, never trained on):
-- PSNR of the object pixels: the render over a black background vs the captured image, MSE over
-  the 3 channels of the pixels inside the mask (values in [0,1]), ``PSNR = -10 log10(MSE)``;
-- depth MAE: mean |rendered depth - measured depth| in mm over pixels inside the mask with a
-  valid measured depth (rendered depth is 0 where nothing was rendered; those count), of the
-  rasterizer's depth (each Gaussian's linearised ray-intersection depth, see core/render/constants.py).
+Held-out evaluation (``holdout`` = K evenly spaced static views, never trained on): PSNR of the
+object pixels and depth MAE (core/train/evaluate.py) of the rasterizer's depth (each Gaussian's
+linearised ray-intersection depth, see core/render/constants.py).
 """
 
 from __future__ import annotations
@@ -35,19 +33,26 @@ import numpy as np
 import torch
 
 from ..model import layout
-from ..train.adam import Adam
 from ..model.capture import Capture, Frame
-from ..train.densify import DensifyConfig, Densifier
-from ..render.device import resolve_device
-from ..model.errors import InputError
+from ..model.errors import ArtgsError, InputError, NothingFound
+from ..model.memory import available_bytes, gigabytes
 from ..model.ply import SplatArrays, write_ply
 from ..model.progress import Progress
 from ..model.registry import ReconstructOptions
-from ..render.rasterize import rasterize
+from ..render.device import resolve_device
+from ..render.rasterize import RenderOutput
 from ..render.sh import rgb_to_sh0
-from ..train.ssim import ssim
+from ..train.adam import Adam
+from ..train.densify import DensifyConfig, Densifier
+from ..train.evaluate import evaluate, view_figures
+from ..train.loop import Plateau, run_loop
+from ..train.losses import LossWeights, view_loss
+from ..train.params import params_splat, render_params, splat_params
+from ..train.views import View, make_view
 
 STAGE = "reconstruct"
+_BYTES_PER_GAUSSIAN = 2500   # measured, see memory_estimate
+_BYTES_PER_PIXEL = 30
 
 
 @dataclass
@@ -56,9 +61,7 @@ class ReconstructConfig:
 
     max_iterations: int = 1000          # cap when no explicit iteration count is given
     sh_degree: int = 1
-    lambda_ssim: float = 0.2
-    lambda_depth: float = 0.1           # weight of depth L1 in units of 1% of the object size
-    lambda_alpha: float = 0.5
+    loss: LossWeights = field(default_factory=LossWeights)  # depth in units of 1% of the size
     init_opacity: float = 0.95
     voxel_pixels: float = 1.0           # init voxel = this many median pixel footprints
     init_scale: float = 0.6             # init standard deviation, in pixel footprints
@@ -69,9 +72,6 @@ class ReconstructConfig:
     lr_opacity: float = 0.01
     lr_scales: float = 2e-3
     lr_quats: float = 1e-3
-    densify_every: int = 100
-    densify_from: int = 100
-    densify_until: int = 500            # last densification iteration
     densify: DensifyConfig = field(default_factory=DensifyConfig)
     plateau_window: int = 200           # iterations per convergence check
     plateau_tol: float = 0.02           # stop when the window mean loss drops by less than this
@@ -85,41 +85,6 @@ def holdout_indices(n: int, k: int) -> list[int]:
     if k <= 0:
         return []
     return sorted({min(n - 1, int((i + 0.5) * n / k)) for i in range(k)})
-
-
-@dataclass
-class View:
-    """One static view as tensors."""
-
-    index: int              # position in capture.static
-    K: torch.Tensor
-    w2c: torch.Tensor
-    width: int
-    height: int
-    rgb: torch.Tensor       # (H,W,3) in [0,1], zero outside the mask
-    mask: torch.Tensor      # (H,W) float 0/1
-    depth: torch.Tensor     # (H,W) metres, 0 = no measurement
-    depth_valid: torch.Tensor  # (H,W) bool: measured and inside the mask
-    pixels: int             # object pixels (at least 1)
-
-
-def make_view(index: int, f: Frame, device: torch.device) -> View:
-    """Frame ``f`` (static view number ``index``) as tensors on ``device``."""
-    def t(a: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32, device=device)
-    h, w = f.rgb.shape[:2]
-    mask = np.ones((h, w), bool) if f.mask is None else f.mask.astype(bool)
-    depth = np.zeros((h, w), np.float32) if f.depth is None else np.nan_to_num(f.depth)
-    rgb = f.rgb.astype(np.float32) / 255.0 * mask[..., None]
-    return View(index, t(f.camera.K), t(f.camera.w2c), w, h, t(rgb), t(mask), t(depth),
-                 torch.as_tensor(mask & (depth > 0), device=device), max(int(mask.sum()), 1))
-
-
-def render_params(params: dict[str, torch.Tensor], v: View, backend: str = "auto"):
-    """Render the optimiser's parameters (``sh0``/``shN`` split) in view ``v``."""
-    return rasterize(params["means"], params["quats"], params["log_scales"],
-                     params["opacity_logits"], torch.cat([params["sh0"], params["shN"]], 1),
-                     v.K, v.w2c, v.width, v.height, None, backend)
 
 
 # --- initialisation ------------------------------------------------------------------------------
@@ -150,6 +115,60 @@ def normal_quats(normals: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
+def voxelize(points: np.ndarray, footprints: np.ndarray, voxel_pixels: float
+             ) -> tuple[float, np.ndarray, np.ndarray]:
+    """Voxel size (``voxel_pixels`` median footprints), each point's voxel number and the points
+    per voxel (one initial Gaussian per voxel)."""
+    voxel = float(voxel_pixels * np.median(footprints))
+    cell = np.floor((points - points.min(0)) / voxel).astype(np.int64)
+    dims = cell.max(0) + 1
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    _, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+    return voxel, inv, counts
+
+
+def initial_count(frames: list[Frame], voxel_pixels: float = 1.0) -> int:
+    """How many Gaussians :func:`initial_splats` would start from (points only: cheap)."""
+    pts, foot = [], []
+    for f in frames:
+        if f.depth is None:
+            continue
+        world, idx = f.camera.backproject(f.depth, f.mask)
+        pts.append(world)
+        foot.append(f.depth.reshape(-1)[idx] / math.sqrt(f.camera.K[0, 0] * f.camera.K[1, 1]))
+    if not pts or sum(len(p) for p in pts) == 0:
+        return 0
+    return len(voxelize(np.concatenate(pts), np.concatenate(foot), voxel_pixels)[2])
+
+
+def memory_estimate(frames: list[Frame], gaussians: int) -> int:
+    """Peak bytes the optimisation adds for ``gaussians`` Gaussians over ``frames``'s views.
+
+    Measured (``artgs reconstruct`` on synthetic captures at 160x120, 320x240 and 640x480, 24
+    views, peak RSS less the RSS after loading): about 2.5 KB per Gaussian (parameters, gradients,
+    Adam moments, rasterizer buffers, autograd intermediates) and 30 bytes per view pixel (the
+    views as tensors: RGB, mask, depth, validity), with a 1.5x margin.
+    """
+    pixels = sum(f.camera.width * f.camera.height for f in frames)
+    return int(1.5 * (_BYTES_PER_GAUSSIAN * gaussians + _BYTES_PER_PIXEL * pixels))
+
+
+def check_memory(frames: list[Frame], cfg: ReconstructConfig, max_side: int) -> None:
+    """Refuse a reconstruction that would not fit in the memory this process can still use."""
+    available = available_bytes()
+    if available is None:
+        return
+    n = max(initial_count(frames, cfg.voxel_pixels), cfg.densify.max_gaussians)
+    need = memory_estimate(frames, n)
+    if need > available:
+        w = max(f.camera.width for f in frames)
+        h = max(f.camera.height for f in frames)
+        raise InputError("--max-side", f"reconstructing {len(frames)} views of {w}x{h} pixels "
+                         f"from about {n:,} Gaussians needs about {gigabytes(need)} of memory, but "
+                         f"only {gigabytes(available)} is available; lower --max-side (now "
+                         f"{max_side or 'off'}) or free memory")
+
+
 def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: float = 1.0,
                    scale: float = 0.6, flat: float = 0.1, opacity: float = 0.95
                    ) -> tuple[SplatArrays, float]:
@@ -175,11 +194,7 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
         raise InputError("capture", "no masked depth pixels in the static views to start from",
                          field="depth_file_path")
     P, C, S = np.concatenate(pts), np.concatenate(cols), np.concatenate(foot)
-    voxel = float(voxel_pixels * np.median(S))
-    cell = np.floor((P - P.min(0)) / voxel).astype(np.int64)
-    dims = cell.max(0) + 1
-    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
-    _, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+    voxel, inv, counts = voxelize(P, S, voxel_pixels)
 
     def total(a: np.ndarray) -> np.ndarray:
         return np.stack([np.bincount(inv, weights=a[:, i]) for i in range(a.shape[1])], -1)
@@ -205,23 +220,6 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
     return splats, voxel
 
 
-# --- evaluation ----------------------------------------------------------------------------------
-
-@torch.no_grad()
-def evaluate(params: dict[str, torch.Tensor], views: list[View], backend: str) -> dict[str, float]:
-    """PSNR of the object pixels (dB) and depth MAE (mm) over ``views`` (see the module doc)."""
-    se, n_px, ae, n_d = 0.0, 0, 0.0, 0
-    for v in views:
-        out = render_params(params, v, backend)
-        m = v.mask.bool()
-        se += float(((out.rgb - v.rgb)[m] ** 2).sum())
-        n_px += 3 * int(m.sum())
-        ae += float((out.depth - v.depth)[v.depth_valid].abs().sum())
-        n_d += int(v.depth_valid.sum())
-    mse = se / max(n_px, 1)
-    return {"psnr": -10 * math.log10(max(mse, 1e-12)), "depth_mae_mm": 1000 * ae / max(n_d, 1)}
-
-
 # --- optimisation --------------------------------------------------------------------------------
 
 class Trainer:
@@ -238,24 +236,22 @@ class Trainer:
         self.views = [make_view(i, frames[i], device) for i in train_idx]
         s = self.init
         self.size = float(np.linalg.norm(s.means.max(0) - s.means.min(0)))
-        params = {"means": s.means, "quats": s.quats, "log_scales": s.log_scales,
-                  "opacity_logits": s.opacity_logits, "sh0": s.sh[:, :1], "shN": s.sh[:, 1:]}
         self.lrs = {"means": cfg.lr_means * self.size, "quats": cfg.lr_quats,
                     "log_scales": cfg.lr_scales, "opacity_logits": cfg.lr_opacity,
                     "sh0": cfg.lr_sh0, "shN": cfg.lr_shN}
-        self.opt = Adam({k: torch.as_tensor(v, device=device) for k, v in params.items()},
-                        self.lrs)
+        self.opt = Adam(splat_params(s, device), self.lrs)
         self.densifier = Densifier(len(s), cfg.densify, device)
         self.depth_unit = 0.01 * self.size
         self.rng = np.random.default_rng(cfg.seed)
         self.order: list[int] = []
         self.it = 0
+        self.last: tuple[RenderOutput, View] | None = None   # the latest render and its view
 
     @property
     def params(self) -> dict[str, torch.Tensor]:
         return self.opt.params
 
-    def step(self) -> tuple[torch.Tensor, Any, View]:
+    def step(self) -> tuple[torch.Tensor, RenderOutput, View]:
         """One iteration on the next training view; returns (loss, render, view)."""
         cfg = self.cfg
         self.it += 1
@@ -266,31 +262,23 @@ class Trainer:
         self.opt.lrs["means"] = self.lrs["means"] * 0.01 ** min(it / self.cap, 1.0)
         p = self.opt.params
         r = render_params(p, v, self.backend)
-        l1 = (r.rgb - v.rgb).abs().sum() / (3 * v.pixels)  # per object pixel
-        loss = (1 - cfg.lambda_ssim) * l1 + cfg.lambda_ssim * (1 - ssim(r.rgb, v.rgb))
-        if cfg.lambda_depth and v.depth_valid.any():
-            loss = loss + cfg.lambda_depth / self.depth_unit * \
-                (r.depth - v.depth)[v.depth_valid].abs().mean()
-        if cfg.lambda_alpha:
-            loss = loss + cfg.lambda_alpha * (r.alpha - v.mask).abs().mean()
+        loss = view_loss(r, v, cfg.loss, self.depth_unit)
         self.opt.zero_grad()
         loss.backward()
-        densify_now = it <= min(cfg.densify_until, self.cap)
-        if densify_now:
-            self.densifier.accumulate(p["means"].detach(), p["means"].grad, v.w2c, v.K,
-                                      v.width, v.height)
+        self.densifier.after_backward(it, self.cap, p["means"], v)
         self.opt.step()
-        if densify_now and it >= cfg.densify_from and it % cfg.densify_every == 0:
-            self.densifier.step(self.opt)
+        self.densifier.after_step(it, self.cap, self.opt)
+        self.last = (r, v)
         return loss.detach(), r, v
 
     def splat(self) -> SplatArrays:
         """The current Gaussians as numpy arrays."""
-        f = {k: v.detach().cpu() for k, v in self.opt.params.items()}
-        return SplatArrays(means=f["means"].numpy(), quats=f["quats"].numpy(),
-                           log_scales=f["log_scales"].numpy(),
-                           opacity_logits=f["opacity_logits"].numpy(),
-                           sh=torch.cat([f["sh0"], f["shN"]], 1).numpy())
+        return params_splat(self.opt.params)
+
+    def figures(self) -> dict[str, float]:
+        """Progress figures of the latest step: its view's PSNR and depth MAE, Gaussian count."""
+        assert self.last is not None
+        return {**view_figures(*self.last), "gaussians": int(self.params["means"].shape[0])}
 
 
 def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
@@ -315,37 +303,18 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
     progress.log(f"reconstruct: {len(trainer.views)} training views, held out {held}, "
                  f"{len(trainer.init)} initial Gaussians (voxel {1000 * trainer.voxel:.1f} mm)")
 
-    window: list[float] = []
-    prev_window = math.inf
-    stopped = "cap"
-    while trainer.it < cap:
-        loss, r, v = trainer.step()
-        it = trainer.it
-        window.append(float(loss))
-        if it % 25 == 0 or it == cap:
-            with torch.no_grad():
-                mse = float(((r.rgb - v.rgb) ** 2)[v.mask.bool()].mean())
-                mae = float((r.depth - v.depth)[v.depth_valid].abs().mean()) * 1000
-            progress.update(STAGE, it / cap, f"iteration {it}/{cap}", loss=float(loss),
-                            psnr=-10 * math.log10(max(mse, 1e-12)), depth_mm=mae,
-                            gaussians=int(trainer.params["means"].shape[0]))
-        else:
-            progress.check_cancel()
-        if len(window) == cfg.plateau_window:
-            cur = float(np.mean(window))
-            window = []
-            if iterations is None and it > cfg.densify_until \
-                    and prev_window - cur < cfg.plateau_tol * prev_window:
-                stopped = "converged"
-                break
-            prev_window = cur
+    plateau = Plateau(cfg.plateau_window, cfg.plateau_tol, after=cfg.densify.until,
+                      enabled=iterations is None)
+    run = run_loop(lambda: float(trainer.step()[0]), trainer.it, cap, progress, STAGE,
+                   plateau=plateau, figures=trainer.figures)
 
     result = trainer.splat()
+    _refuse_unusable(result, run.iterations)
     figures: dict[str, Any] = {
-        "iterations": trainer.it, "stopped": stopped, "gaussians": len(result),
+        "iterations": run.iterations, "stopped": run.stopped, "gaussians": len(result),
         "initial_gaussians": len(trainer.init),
         "train_seconds": round(time.perf_counter() - t0, 2),
-        "final_loss": float(np.mean(window)) if window else prev_window,
+        "final_loss": run.final_loss,
         "holdout_views": [static[i].index for i in held],
     }
     if held:
@@ -356,8 +325,23 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
     return figures
 
 
+def _refuse_unusable(result: SplatArrays, iterations: int) -> None:
+    """A splat with no Gaussians or with values no splat can hold is not written over the last
+    good splat.ply: the stage fails, saying what happened."""
+    kept = f"{layout.SPLAT} is left as it was"
+    if len(result) == 0:
+        raise NothingFound(f"reconstruction ended with no Gaussians after {iterations} "
+                           f"iterations (all pruned); {kept}. Check the masks and depth units")
+    invalid = result.first_invalid()
+    if invalid is not None:
+        name, row, _, why = invalid
+        raise ArtgsError(f"reconstruction diverged after {iterations} iterations (Gaussian "
+                         f"{row}'s {name} {why}); {kept}")
+
+
 def check(capture: Capture, options: ReconstructOptions) -> None:
-    """Refuse options the capture cannot serve, before any work."""
+    """Refuse options the capture cannot serve, or a reconstruction that would not fit in
+    memory, before any work."""
     static = capture.static
     if not static:
         raise InputError(capture.root, "no static frames to reconstruct from", field="phase")
@@ -368,6 +352,9 @@ def check(capture: Capture, options: ReconstructOptions) -> None:
     if options.iterations is not None and options.iterations < 1:
         raise InputError(capture.root, f"--iterations must be positive, not {options.iterations}",
                          field="iterations")
+    held = holdout_indices(len(static), options.holdout)
+    check_memory([f for i, f in enumerate(static) if i not in held], ReconstructConfig(),
+                 options.max_side)
 
 
 def run(out: Path, capture: Capture, options: ReconstructOptions,

@@ -128,15 +128,3 @@ def twin_depth_for_capture(capture: Capture, device="cpu", spacing: float = SPAC
             res = render(g, frame.camera)
         return np.where(res.alpha.cpu().numpy() > 0.5, res.depth.cpu().numpy(), 0.0)
     return depth
-
-
-def concat(*splats: Gaussians) -> Gaussians:
-    """Several splats as one (e.g. the object's and the robot's, rendered together); SH degrees
-    are padded with zeros to the largest."""
-    k = max(g.sh.shape[1] for g in splats)
-
-    def pad(sh: torch.Tensor) -> torch.Tensor:
-        return torch.cat([sh, sh.new_zeros(sh.shape[0], k - sh.shape[1], 3)], 1)
-    return Gaussians(*(torch.cat([getattr(g, f) for g in splats]) for f in
-                       ("means", "quats", "log_scales", "opacity_logits")),
-                     torch.cat([pad(g.sh) for g in splats]))

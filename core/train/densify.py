@@ -4,6 +4,8 @@ Gaussians whose mean view-space positional gradient is large are cloned (small o
 into two smaller ones (large ones); nearly transparent or too large Gaussians are pruned.
 The 3DGS threshold depends on the loss and the image size, so here it is only a floor: each
 step densifies at most the ``top_fraction`` of Gaussians with the largest gradients.
+Schedule: gradients are accumulated from the first iteration to ``until``; every ``every``
+iterations from ``start`` on, the Gaussians are densified and pruned (:meth:`Densifier.after_step`).
 
 The view-space (NDC) gradient is recovered from the gradient of the 3D means: for a camera-frame
 mean (x, y, z), moving the projected pixel by du at fixed depth moves x by du z / fx, so
@@ -19,10 +21,14 @@ import torch
 
 from .adam import Adam
 from ..render.cpu.project import quat_to_rotmat
+from .views import View
 
 
 @dataclass
 class DensifyConfig:
+    every: int = 100               # iterations between densification steps ...
+    start: int = 100               # ... from this iteration ...
+    until: int = 500               # ... to this one (gradients are accumulated up to it)
     grad_threshold: float = 2e-4   # mean NDC gradient norm that triggers clone/split
     top_fraction: float = 0.02     # ... and only for this top share of the Gaussians per step
     dense_size: float = 0.01       # metres: larger Gaussians are split, smaller ones cloned
@@ -55,6 +61,24 @@ class Densifier:
         seen = (grad != 0).any(-1)
         self.grad_sum += torch.where(seen, torch.hypot(gx, gy), torch.zeros_like(gx))
         self.count += seen.float()
+
+    def active(self, it: int, cap: int) -> bool:
+        """Whether iteration ``it`` of at most ``cap`` is within the densification period."""
+        return it <= min(self.config.until, cap)
+
+    def after_backward(self, it: int, cap: int, means: torch.Tensor, view: View) -> None:
+        """Accumulate iteration ``it``'s positional gradient (``means.grad``, rendered in
+        ``view``) while densification is active."""
+        if self.active(it, cap):
+            self.accumulate(means.detach(), means.grad, view.w2c, view.K, view.width, view.height)
+
+    def after_step(self, it: int, cap: int, opt: Adam) -> dict[str, int] | None:
+        """Densify and prune after the optimiser step of iteration ``it`` when the schedule says
+        so; returns the counts then."""
+        cfg = self.config
+        if self.active(it, cap) and it >= cfg.start and it % cfg.every == 0:
+            return self.step(opt)
+        return None
 
     @torch.no_grad()
     def step(self, opt: Adam) -> dict[str, int]:

@@ -11,6 +11,7 @@ import numba
 import numpy as np
 import torch
 
+from ...model.interrupt import cancellable
 from . import blend_kernels as rk
 from . import project_kernels as pk
 
@@ -24,6 +25,7 @@ class _RasterizeCPU(torch.autograd.Function):
     background, alpha-weighted depth sum (H,W), alpha (H,W)."""
 
     @staticmethod
+    @cancellable
     def forward(ctx, means, quats, log_scales, opacity_logits, colors, cam, width, height, near,
                 low_pass):
         arrays = [_f32(t) for t in (means, quats, log_scales, opacity_logits, colors)]
@@ -48,6 +50,7 @@ class _RasterizeCPU(torch.autograd.Function):
                      for a in (out_c, out_d, out_a))
 
     @staticmethod
+    @cancellable
     def backward(ctx, g_c, g_d, g_a):
         (arrays, cam, width, height, proj, visible, order, feats, offsets, ids,
          out_a, out_n) = ctx.saved
@@ -77,9 +80,14 @@ def camera_array(K: torch.Tensor, w2c: torch.Tensor) -> np.ndarray:
                            w2c[:3, 3]]).astype(np.float32)
 
 
+@cancellable
 def rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K, w2c, width, height, near,
                   low_pass):
-    """Colour sum without background (H,W,3), alpha-weighted depth sum (H,W), alpha (H,W)."""
+    """Colour sum without background (H,W,3), alpha-weighted depth sum (H,W), alpha (H,W).
+
+    A Ctrl-C inside the kernels or torch's autograd machinery comes out as
+    ``Cancelled`` (core/model/interrupt.py), never a ``SystemError``.
+    """
     return _RasterizeCPU.apply(means, quats, log_scales, opacity_logits, colors,
                                camera_array(K, w2c), int(width), int(height), float(near),
                                float(low_pass))

@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit, prange
 
 from .. import constants as model
+from .jit import kernel
 
 NF = 12  # floats per Gaussian in ``feats`` and its gradient
 TILE_W, TILE_H = 4, 4  # pixels per tile; the blend loops vectorise over its TILE_W * TILE_H pixels
@@ -51,7 +52,7 @@ def exp_neg(x):
     return p * p
 
 
-@njit(cache=True)
+@kernel
 def spread_stride(n):
     """A stride coprime with n near 0.618 n: i -> (i * stride) % n visits 0..n-1 once each and
     spreads any contiguous run of i over the whole range. Used on rows of tiles, so prange's
@@ -67,7 +68,7 @@ def spread_stride(n):
         stride += 1
 
 
-@njit(cache=True)
+@kernel
 def depth_order(depths, candidates):
     """``candidates`` sorted by ``depths`` (all > 0), stable: LSD radix sort on the float bits."""
     keys = depths.view(np.uint32)
@@ -88,7 +89,7 @@ def depth_order(depths, candidates):
     return order
 
 
-@njit(cache=True)
+@kernel
 def sort_visible(proj, extent, visible):
     """The visible rows of ``proj`` (N,12) front to back: (order, feats (M,12), extent (M,2))."""
     order = depth_order(np.ascontiguousarray(proj[:, 9]), np.flatnonzero(visible))
@@ -100,7 +101,7 @@ def sort_visible(proj, extent, visible):
     return order, feats, ext
 
 
-@njit(cache=True)
+@kernel
 def bin_tiles(feats, extent, width, height):
     """Tile lists: ``offsets`` (tiles+1) and Gaussian ids (depth order kept inside each tile)."""
     tiles_x = (width + TILE_W - 1) // TILE_W
@@ -137,7 +138,7 @@ def bin_tiles(feats, extent, width, height):
     return offsets, ids
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@kernel(parallel=True, fastmath=True)
 def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n):
     """Front-to-back blend: colour sum (H,W,3), depth sum, alpha, and per pixel the number of
     tile-list entries up to its last contributor."""
@@ -197,7 +198,7 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
                 out_n[i, j] = last[p]
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@kernel(parallel=True, fastmath=True)
 def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g_a, grads):
     """Gradients w.r.t. ``feats`` summed into per-thread buffers ``grads`` (threads, M, 10)."""
     tiles_x = (width + TILE_W - 1) // TILE_W
@@ -282,7 +283,7 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
             buf[g, 11] += s_dv
 
 
-@njit(cache=True)
+@kernel
 def sum_thread_grads(grads, order, out):
     """out[order[m]] = sum over threads of grads[:, m] (rows of ``out`` not in order untouched).
 

@@ -9,9 +9,10 @@ layout (``mean_x, mean_y, conic a, b, c, opacity, r, g, b, depth, slope_x, slope
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
 from .. import constants as model
+from .jit import kernel
 
 f32 = np.float32
 SIGMA = f32(model.SIGMA_CUTOFF)
@@ -20,7 +21,7 @@ _FOV_PAD = f32(model.FOV_PAD)
 MAX_SLOPE = f32(model.MAX_SLOPE)
 
 
-@njit(fastmath=True, cache=True)
+@kernel(fastmath=True)
 def _rotation(qw, qx, qy, qz):
     """Normalised quaternion, its norm, and the rotation matrix (row-major 9-tuple)."""
     norm = max(np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz), f32(1e-12))
@@ -31,7 +32,7 @@ def _rotation(qw, qx, qy, qz):
     return w, x, y, z, norm, R
 
 
-@njit(fastmath=True, cache=True)
+@kernel(fastmath=True)
 def _column(cam, R, s, j, j00, j02, j11, j12):
     """Column j of A = W R S (camera-frame) and of T = J A."""
     m0, m1, m2 = R[j] * s, R[3 + j] * s, R[6 + j] * s
@@ -41,7 +42,7 @@ def _column(cam, R, s, j, j00, j02, j11, j12):
     return a0, a1, a2, j00 * a0 + j02 * a2, j11 * a1 + j12 * a2
 
 
-@njit(fastmath=True, cache=True)
+@kernel(fastmath=True)
 def _column_backward(cam, R, s, j, j00, j02, j11, j12, g_a, g_b, g_c):
     """Backward of column j: gradients of R[:, j], log_scale j and the Jacobian entries."""
     a0, a1, a2, t0, t1 = _column(cam, R, s, j, j00, j02, j11, j12)
@@ -56,7 +57,7 @@ def _column_backward(cam, R, s, j, j00, j02, j11, j12, g_a, g_b, g_c):
             gt0 * a0, gt0 * a2, gt1 * a1, gt1 * a2)
 
 
-@njit(fastmath=True, cache=True)
+@kernel(fastmath=True)
 def _camera_rotation(cam, R):
     """M = W R, the camera-from-Gaussian rotation (row-major 9-tuple)."""
     return (cam[4] * R[0] + cam[5] * R[3] + cam[6] * R[6],
@@ -70,7 +71,7 @@ def _camera_rotation(cam, R):
             cam[10] * R[2] + cam[11] * R[5] + cam[12] * R[8])
 
 
-@njit(fastmath=True, cache=True)
+@kernel(fastmath=True)
 def _slope_terms(M, x, y, z, log_scales):
     """b = M^T t, e = b / s^2, c = M e (x, y rows) and q = b . e of the planar depth slopes."""
     b0 = M[0] * x + M[3] * y + M[6] * z
@@ -85,7 +86,7 @@ def _slope_terms(M, x, y, z, log_scales):
     return (b0, b1, b2), (e0, e1, e2), (i0, i1, i2), cx, cy, q
 
 
-@njit(fastmath=True, cache=True)
+@kernel(fastmath=True)
 def _slopes(cam, M, x, y, z, log_scales):
     """Planar depth change per pixel (x, y), limited to MAX_SLOPE footprints (raster_model)."""
     _, _, _, cx, cy, q = _slope_terms(M, x, y, z, log_scales)
@@ -94,7 +95,7 @@ def _slopes(cam, M, x, y, z, log_scales):
     return min(max(a_u, -lim_u), lim_u), min(max(a_v, -lim_v), lim_v)
 
 
-@njit(fastmath=True, cache=True)
+@kernel(fastmath=True)
 def _slope_backward(c, f, z, q, g):
     """Gradients (z, q, c) of one slope ``-z^2 c / (q f)`` limited to +-MAX_SLOPE z / f, from g."""
     a = -z * z * c / (q * f)
@@ -106,7 +107,7 @@ def _slope_backward(c, f, z, q, g):
     return _TWO * a / z * g, -a / q * g, -z * z / (q * f) * g
 
 
-@njit(fastmath=True, cache=True)
+@kernel(fastmath=True)
 def _slopes_backward(cam, M, x, y, z, log_scales, g_u, g_v):
     """Backward of :func:`_slopes`: gradients of (x, y, z), log_scales (3) and M (9, row-major)."""
     b, e, inv, cx, cy, q = _slope_terms(M, x, y, z, log_scales)
@@ -128,7 +129,7 @@ def _slopes_backward(cam, M, x, y, z, log_scales, g_u, g_v):
     return g_x, g_y, g_z, g_ls, g_M
 
 
-@njit(fastmath=True, cache=True)
+@kernel(fastmath=True)
 def _limits(cam, width, height):
     fx, fy, cx, cy = cam[0], cam[1], cam[2], cam[3]
     tan_x, tan_y = f32(0.5) * width / fx, f32(0.5) * height / fy
@@ -136,7 +137,7 @@ def _limits(cam, width, height):
             (height - cy) / fy + _FOV_PAD * tan_y, cy / fy + _FOV_PAD * tan_y)
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@kernel(parallel=True, fastmath=True)
 def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width, height, near,
                     low_pass, out, extent, visible):
     """Fill ``out`` (N,12), ``extent`` (N,2) and ``visible`` (N,) for every Gaussian."""
@@ -182,7 +183,7 @@ def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width
         extent[n, 0], extent[n, 1] = ex, ey
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@kernel(parallel=True, fastmath=True)
 def project_backward(means, quats, log_scales, cam, width, height, feats, visible, grad,
                      g_means, g_quats, g_log_scales, g_logits, g_colors):
     """Gradients of the Gaussian parameters from ``grad`` (N,12), the gradient of ``feats``."""

@@ -14,12 +14,18 @@ from typing import Any
 import numpy as np
 
 from ...model import layout
-from ...model.capture import TRANSFORMS, Capture
-from ...model.errors import InputError
+from ...model.capture import Capture
+from ...model.transforms import TRANSFORMS
+from ...model.errors import InputError, NothingFound
 from ...model.joints import Articulation, write_articulation
 from ...model.ply import read_ply
 from ...model.progress import Progress
 from ...model.registry import METHODS, ProposeOptions, require
+
+_NOTHING_FOUND_HINT = {
+    "motion": "Check that the interaction frames show a part moving between times.",
+    "vlm": "The VLM's answers held no usable joint; try another model or --method motion.",
+}
 
 
 def check(capture: Capture, options: ProposeOptions) -> None:
@@ -59,7 +65,7 @@ def propose(capture: Capture, out: str | Path, progress: Progress,
     check(capture, options)
     arrays = read_ply(require(out, layout.SPLAT))
     if options.method == "motion":
-        from .motion import propose_motion
+        from .motion.route import propose_motion
         opacity = 1.0 / (1.0 + np.exp(-np.asarray(arrays.opacity_logits, float)))
         joints, meta = propose_motion(capture, arrays.means, opacity,
                                       lambda camera: _render_depth(arrays, camera, options.device),
@@ -70,7 +76,10 @@ def propose(capture: Capture, out: str | Path, progress: Progress,
         joints, meta = propose_vlm(capture, Gaussians.from_arrays(arrays), progress,
                                    vlm_of(options), options.device)
     if not joints:
-        progress.log(f"no joints found by the {options.method} route", level="warning")
+        kept = (f"{out / layout.PROPOSALS} is left as it was" if (out / layout.PROPOSALS).exists()
+                else f"no {layout.PROPOSALS} written")
+        raise NothingFound(f"the {options.method} route found no joints; {kept}. "
+                           + _NOTHING_FOUND_HINT[options.method])
     articulation = Articulation(joints, {"source": options.method, **meta})
     write_articulation(out / layout.PROPOSALS, articulation)
     for j in joints:

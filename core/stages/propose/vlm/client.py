@@ -8,8 +8,9 @@ refuses to build a configuration without one. Inside Blender the add-on must als
 ``bpy.app.online_access`` before starting a worker that uses the VLM.
 
 Retries: connection errors, HTTP 5xx and 429 are retried ``retries`` times with exponential
-backoff; other 4xx answers fail at once; a request that gets no answer within ``timeout`` fails
-without retry (the server may still be busy with it).
+backoff; other 4xx answers fail at once. ``timeout`` is a deadline for the whole request,
+retries included: a watchdog shuts the connection down when it passes, so neither a silent nor
+a trickling server holds the stage longer.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import http.client
 import json
 import os
 import socket
+import threading
 import time
 import urllib.error
 import urllib.parse
@@ -39,7 +41,7 @@ COORDS = ("auto", "grid1000", "pixels", "unit")
 class VlmConfig:
     """Where and how to ask the VLM.
 
-    ``coords`` says how bare coordinate lists in answers are read (see ``core.vlm_parse``):
+    ``coords`` says how bare coordinate lists in answers are read (see ``vlm.parse``):
     ``auto`` (default), ``grid1000`` (InternVL), ``pixels`` (Qwen2.5-VL) or ``unit`` (0..1).
     ``width`` x ``height`` is the rendered view sent with each question (multiples of 28 suit
     InternVL's 448 px tiles and Qwen's 28 px patches).
@@ -106,49 +108,137 @@ def assistant_message(text: str) -> dict[str, Any]:
 
 
 def chat(config: VlmConfig, messages: list[dict[str, Any]]) -> str:
-    """Send ``messages`` and return the answer text; :class:`ArtgsError` names the endpoint."""
+    """Send ``messages`` and return the answer text; :class:`ArtgsError` names the endpoint.
+
+    ``config.timeout`` is a deadline for the whole request, retries and back-off included: a
+    server that trickles its answer byte by byte is cut off when it passes.
+    """
     url = f"{config.endpoint}/chat/completions"
     body = json.dumps({"model": config.model, "messages": messages, "temperature": 0,
                        "max_tokens": config.max_tokens}).encode("utf-8")
     headers = {"Content-Type": "application/json", "Accept": "application/json"}
     if config.api_key:
         headers["Authorization"] = f"Bearer {config.api_key}"
-    opener = _opener(url)
+    deadline = time.monotonic() + config.timeout
+    late = ArtgsError(f"VLM endpoint {url} gave no complete answer within {config.timeout:g} s "
+                      "(the whole request, retries included; raise --vlm-timeout for slow models)")
+    watchdog = _Watchdog(deadline)
+    try:
+        return _post(urllib.request.Request(url, data=body, headers=headers, method="POST"),
+                     config, watchdog, late)
+    finally:
+        watchdog.disarm()
+
+
+def _post(request: urllib.request.Request, config: VlmConfig, watchdog: _Watchdog,
+          late: ArtgsError) -> str:
+    """The request with retries until ``watchdog.deadline``; the answer text."""
+    url, deadline = request.full_url, watchdog.deadline
+    opener = _opener(url, watchdog)
     attempt = 0
     while True:
-        request = urllib.request.Request(url, data=body, headers=headers, method="POST")
         try:
-            with opener.open(request, timeout=config.timeout) as response:
+            with opener.open(request, timeout=max(deadline - time.monotonic(), 1e-3)) as response:
                 raw = response.read()
+            if time.monotonic() >= deadline:   # the watchdog cut the answer short
+                raise late
             return _answer_text(raw, url)
         except urllib.error.HTTPError as exc:
             detail = _excerpt(exc.read() if exc.fp is not None else b"")
             problem = f"VLM endpoint {url} answered HTTP {exc.code} {exc.reason}: {detail}"
             if exc.code < 500 and exc.code != 429:
                 raise ArtgsError(problem) from None
-        except (TimeoutError, socket.timeout) as exc:
-            raise ArtgsError(f"VLM endpoint {url} gave no answer within {config.timeout:g} s "
-                             f"(raise --vlm-timeout for slow models)") from exc
+        except (TimeoutError, socket.timeout):
+            raise late from None
         except urllib.error.URLError as exc:
-            if isinstance(exc.reason, (TimeoutError, socket.timeout)):
-                raise ArtgsError(f"VLM endpoint {url}: connection timed out after "
-                                 f"{config.timeout:g} s") from exc
+            if isinstance(exc.reason, (TimeoutError, socket.timeout)) \
+                    or time.monotonic() >= deadline:
+                raise late from None
             problem = f"VLM endpoint {url} is unreachable: {exc.reason}"
         except (OSError, http.client.HTTPException) as exc:
+            if time.monotonic() >= deadline:
+                raise late from None
             problem = f"VLM endpoint {url} connection failed: {exc}"
         if attempt >= config.retries:
             raise ArtgsError(f"{problem} (after {attempt + 1} attempts)")
-        time.sleep(config.backoff * 2 ** attempt)
+        pause = config.backoff * 2 ** attempt
+        if time.monotonic() + pause >= deadline:
+            raise ArtgsError(f"{problem} (no time left within --vlm-timeout "
+                             f"{config.timeout:g} s to retry)")
+        time.sleep(pause)
         attempt += 1
 
 
-def _opener(url: str) -> urllib.request.OpenerDirector:
-    """A URL opener; a server on this machine is reached directly, never through a proxy from
-    ``$http_proxy``/``$https_proxy`` (others follow the environment like any urllib client)."""
+class _Watchdog:
+    """Shuts connections' sockets down at the deadline, so a blocked read ends then."""
+
+    def __init__(self, deadline: float) -> None:
+        self.deadline = deadline
+        self.timers: list[threading.Timer] = []
+
+    def arm(self, sock: socket.socket) -> None:
+        timer = threading.Timer(max(self.deadline - time.monotonic(), 0.0), _shutdown, (sock,))
+        timer.daemon = True
+        timer.start()
+        self.timers.append(timer)
+
+    def disarm(self) -> None:
+        for timer in self.timers:
+            timer.cancel()
+
+
+def _shutdown(sock: socket.socket) -> None:
+    try:
+        sock.shutdown(socket.SHUT_RDWR)
+    except OSError:
+        pass   # already closed
+
+
+def _deadline_connection(base: type) -> type:
+    """``base`` (HTTP(S)Connection) whose socket is shut down at the watchdog's deadline."""
+    class Connection(base):
+        def __init__(self, *args, watchdog: _Watchdog, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            self._watchdog = watchdog
+
+        def connect(self) -> None:
+            super().connect()
+            self._watchdog.arm(self.sock)
+    return Connection
+
+
+_HTTPConnection = _deadline_connection(http.client.HTTPConnection)
+_HTTPSConnection = _deadline_connection(http.client.HTTPSConnection)
+
+
+class _HTTPHandler(urllib.request.HTTPHandler):
+    def __init__(self, watchdog: _Watchdog) -> None:
+        super().__init__()
+        self.watchdog = watchdog
+
+    def http_open(self, req):
+        return self.do_open(_HTTPConnection, req, watchdog=self.watchdog)
+
+
+class _HTTPSHandler(urllib.request.HTTPSHandler):
+    def __init__(self, watchdog: _Watchdog) -> None:
+        super().__init__()
+        self.watchdog = watchdog
+
+    def https_open(self, req):
+        return self.do_open(_HTTPSConnection, req, context=self._context,
+                            watchdog=self.watchdog)
+
+
+def _opener(url: str, watchdog: _Watchdog) -> urllib.request.OpenerDirector:
+    """A URL opener whose connections end at the watchdog's deadline; a server on this machine
+    is reached directly, never through a proxy from ``$http_proxy``/``$https_proxy`` (others
+    follow the environment like any urllib client)."""
+    handlers: list[Any] = [_HTTPHandler(watchdog), _HTTPSHandler(watchdog)]
     host = (urllib.parse.urlsplit(url).hostname or "").lower()
     if host in ("localhost", "::1") or host.startswith("127."):
-        return urllib.request.build_opener(urllib.request.ProxyHandler({}))
-    return urllib.request.build_opener()
+        handlers.append(urllib.request.ProxyHandler({}))
+    return urllib.request.build_opener(*handlers)
 
 
 def _answer_text(raw: bytes, url: str) -> str:

@@ -1,9 +1,9 @@
 """Joint proposals from a vision-language model (ArtGS paper, "VLM-based Bones Reasoning").
 
 1. Render a frontal RGB-D view of the static splat (:func:`frontal_camera`).
-2. Ask the three questions of ``core.vlm_prompts`` (classification, bones reasoning, then the
-   handle within each part's box) through ``core.vlm_client``; read them with ``core.vlm_parse``.
-3. Lift each part's image answer to a 3D joint with the rendered depth (``core.lift``).
+2. Ask the three questions of ``vlm.prompts`` (classification, bones reasoning, then the
+   handle within each part's box) through ``vlm.client``; read them with ``vlm.parse``.
+3. Lift each part's image answer to a 3D joint with the rendered depth (``core.geometry.lift``).
 
 A part whose answer cannot be used is skipped with a logged reason; the others are kept.
 """
@@ -33,7 +33,7 @@ from .parse import PartAnswer, parse_classification, parse_handle, parse_parts, 
 STAGE = "propose"
 HFOV_DEG = 45.0        # horizontal field of view of the rendered view
 FILL = 0.85            # fraction of the image the object's box may span
-SNAP_DEG = 35.0        # the viewing direction snaps to the object's face within this angle
+VIEW_SNAP_DEG = 35.0   # the rendered view's direction snaps to the object's face within this
 ELEVATION_DEG = (-45.0, -10.0)  # the view looks down on the object by this much (clipped)
 MIN_ALPHA = 0.5        # rendered pixels less opaque than this carry no depth
 BACKGROUND = (1.0, 1.0, 1.0)
@@ -186,7 +186,7 @@ def frontal_camera(capture: Capture, points: np.ndarray, width: int, height: int
     Direction: the mean viewing direction of the interaction cameras (they watch the parts move),
     else of the static cameras; snapped to the nearest face of the object's footprint rectangle
     (minimum-area rectangle of the points seen from above, ``up`` from :func:`up_direction`) when
-    within :data:`SNAP_DEG`, looking down by the cameras' mean elevation clipped to
+    within :data:`VIEW_SNAP_DEG`, looking down by the cameras' mean elevation clipped to
     :data:`ELEVATION_DEG`.
     """
     up = up_direction(capture) if up is None else up / np.linalg.norm(up)
@@ -204,7 +204,7 @@ def frontal_camera(capture: Capture, points: np.ndarray, width: int, height: int
         faces = [np.array([math.cos(a), math.sin(a), 0.0])
                  for a in angle + np.arange(4) * math.pi / 2]
         best = max(faces, key=lambda f: f @ horiz)
-        if best @ horiz >= math.cos(math.radians(SNAP_DEG)):
+        if best @ horiz >= math.cos(math.radians(VIEW_SNAP_DEG)):
             horiz = best
     else:
         horiz = np.array([math.cos(angle), math.sin(angle), 0.0])

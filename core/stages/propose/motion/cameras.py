@@ -1,0 +1,240 @@
+"""The fixed interaction cameras: depth per step, closed-state depth, change thresholds, and
+projecting world points into them.
+
+Everything change detection (core/stages/propose/motion/change.py) and tracking compare comes
+from an :class:`InteractionView`'s ``depth`` / ``mask`` per step and its closed state ``ref``, all
+built in :func:`make_views`; a source of known occluders (a robot twin rendering the arm per step)
+joins there, before any comparison.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.ndimage import minimum_filter
+
+from ....model.cameras import Camera
+from ....geometry.occlusion import object_depth
+from ....model.capture import Capture, Frame
+from .config import CLOSED_TIME, MotionConfig
+
+
+@dataclass
+class InteractionView:
+    """One fixed interaction camera: its object depth per step, free space per step (see
+    :func:`object_depth`), and closed-state depth."""
+
+    name: str
+    camera: Camera
+    depth: dict[int, np.ndarray]
+    free: dict[int, np.ndarray]
+    ref: np.ndarray
+    ref_source: str
+    threshold: float = 0.0            # change threshold between measurements (m)
+    ref_threshold: float = 0.0        # ... between a measurement and the closed state (m)
+    rays: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    ranges: dict[int | str, Any] = field(default_factory=dict, repr=False)   # per-step caches
+
+    def changed_at(self, t: int) -> np.ndarray:
+        """Pixels whose surface at step ``t`` came in front of the closed state's (boolean image):
+        where a part opened to (parts open outwards from the closed state; what they reveal lies
+        behind it). With a rendered closed state :func:`change.mark_changed` sets these."""
+        key = f"changed{t}"
+        if key not in self.ranges:
+            d = self.depth[t]
+            self.ranges[key] = (d > 0) & ((self.ref <= 0) | (d < self.ref - self.ref_threshold))
+        return self.ranges[key]
+
+    def free_near(self, t: int) -> np.ndarray:
+        """Free space (:func:`object_depth`) that a pixel's whole 3x3 neighbourhood agrees on."""
+        key = f"free{t}"
+        if key not in self.ranges:
+            self.ranges[key] = minimum_filter(self.free[t], size=3, mode="nearest")
+        return self.ranges[key]
+
+    def occluder(self, t: int) -> np.ndarray:
+        """Depth of something in front that is not the object (robot, hand), inf where none."""
+        f = self.free[t]
+        return np.where((f > 0) & np.isfinite(f), f, np.inf)
+
+    def nearest_at(self, t: int) -> np.ndarray:
+        """Nearest valid depth in each pixel's 3x3 neighbourhood at step ``t`` (0: none)."""
+        key = f"near{t}"
+        if key not in self.ranges:
+            d = self.depth[t]
+            near = minimum_filter(np.where(d > 0, d, np.inf), size=3, mode="nearest")
+            self.ranges[key] = np.where(np.isfinite(near), near, 0.0)
+        return self.ranges[key]
+
+    def range_at(self, t: int | str) -> tuple[np.ndarray, np.ndarray]:
+        """Near and far depth of each pixel's surface at step ``t`` (``"ref"``: closed state), see
+        :func:`depth_range`; comparing a point's depth with this range tolerates grazing views."""
+        if t not in self.ranges:
+            self.ranges[t] = depth_range(self.ref if t == "ref" else self.depth[t])
+        return self.ranges[t]
+
+
+def depth_range(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel, the depth range its surface spans across the pixel: ``d -+ slack`` where the
+    slack is half the depth change to the neighbours on a smooth surface (both neighbours valid
+    and in line, per image direction); 0 where there is no object."""
+    slack = np.zeros_like(d)
+    pad = np.pad(d, 1, mode="edge")
+    for a, b in ((pad[1:-1, :-2], pad[1:-1, 2:]), (pad[:-2, 1:-1], pad[2:, 1:-1])):
+        smooth = (a > 0) & (b > 0) & (np.abs(a + b - 2 * d) < 0.02 * d + 0.25 * np.abs(b - a))
+        slack = np.maximum(slack, np.where(smooth, 0.5 * np.abs(b - a), 0.0))
+    valid = d > 0
+    return np.where(valid, d - slack, 0.0), np.where(valid, d + slack, 0.0)
+
+
+def group_views(frames: list[Frame]) -> list[list[Frame]]:
+    """Interaction frames grouped by fixed camera (same pose and intrinsics), sorted by time."""
+    groups: list[list[Frame]] = []
+    for f in frames:
+        for g in groups:
+            c = g[0].camera
+            if (np.allclose(c.c2w, f.camera.c2w, atol=1e-6) and np.allclose(c.K, f.camera.K)
+                    and (c.width, c.height) == (f.camera.width, f.camera.height)):
+                g.append(f)
+                break
+        else:
+            groups.append([f])
+    return [sorted(g, key=lambda f: f.time) for g in groups]
+
+
+def make_views(capture: Capture, render_depth, config: MotionConfig, robot_depth=None
+               ) -> list[InteractionView]:
+    """Views of the interaction cameras; ``render_depth(camera) -> (H,W)`` gives the closed state
+    where a camera has no time-0 frame; ``robot_depth(frame) -> (H,W) | None`` the robot twin's
+    depth (0 where it does not cover the pixel; see :func:`object_depth`)."""
+    t0 = CLOSED_TIME
+    views = []
+    for k, g in enumerate(group_views(capture.interaction)):
+        depth, free = {}, {}
+        for f in g:
+            depth[f.time], free[f.time] = object_depth(
+                f, None if robot_depth is None else robot_depth(f), config.min_threshold)
+        if g[0].time == t0:
+            ref, source = depth[t0], g[0].file_path
+        else:
+            ref, source = render_depth(g[0].camera).astype(np.float32), "splat"
+        v = InteractionView(f"cam{k}", g[0].camera, depth, free, ref, source)
+        v.threshold, v.ref_threshold = _thresholds(v, config, source == "splat")
+        v.rays = g[0].camera.pixel_rays()
+        views.append(v)
+    return views
+
+
+def masked_depth(f: Frame) -> np.ndarray:
+    d = np.zeros(f.rgb.shape[:2], np.float32) if f.depth is None else np.nan_to_num(f.depth)
+    if f.mask is not None:
+        d = np.where(f.mask, d, 0.0).astype(np.float32)
+    return d
+
+
+def noise_sigma(depths: list[np.ndarray]) -> float:
+    """Depth noise (m, one sigma) from second differences along image rows on smooth surfaces
+    (median over the images; a robust spread, so edges do not count)."""
+    sigmas = []
+    for d in depths:
+        a, b, c = d[:, :-2], d[:, 1:-1], d[:, 2:]
+        ok = (a > 0) & (b > 0) & (c > 0)
+        if ok.sum() > 20:
+            sigmas.append(1.4826 * float(np.median(np.abs(a + c - 2 * b)[ok])) / math.sqrt(6.0))
+    return float(np.median(sigmas)) if sigmas else 0.0
+
+
+def _thresholds(v: InteractionView, config: MotionConfig, rendered: bool) -> tuple[float, float]:
+    """Change thresholds of a view: between two measurements, and between a measurement and the
+    closed state (larger when the closed state is a render of the splat: its error on pixels that
+    no step changes sets it)."""
+    thr = max(config.noise_sigmas * math.sqrt(2.0) * noise_sigma(list(v.depth.values())),
+              config.min_threshold)
+    if not rendered:
+        return thr, thr
+    stack = np.stack(list(v.depth.values()))
+    still = np.all(stack > 0, axis=0) & (stack.max(0) - stack.min(0) < thr) & (v.ref > 0)
+    if still.sum() < 20:
+        return thr, max(thr, config.render_threshold)
+    err = float(np.median(np.abs(np.median(stack, axis=0) - v.ref)[still]))
+    return thr, max(thr, config.render_sigmas * 1.4826 * err)
+
+
+def pixels_of(v: InteractionView, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Project world points into ``v``: inside-image flags, flat pixel indices (0 outside), and
+    z-depths."""
+    if "proj" not in v.ranges:
+        w2c = v.camera.w2c
+        v.ranges["proj"] = (w2c[:3, :3].T.copy(), w2c[:3, 3].copy())
+    Rt, tr = v.ranges["proj"]
+    cam = points @ Rt + tr
+    z = cam[:, 2]
+    K = v.camera.K
+    h, w = v.ref.shape
+    with np.errstate(divide="ignore", invalid="ignore"):
+        j = np.floor(cam[:, 0] / z * K[0, 0] + K[0, 2])
+        i = np.floor(cam[:, 1] / z * K[1, 1] + K[1, 2])
+    inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
+    flat = np.where(inside, i * w + j, 0).astype(np.int64)
+    return inside, flat, z
+
+
+def lookup(v: InteractionView, t: int | str, points: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Project world points into ``v`` at step ``t``: inside-image flags, their z-depth, and the
+    depth range (near, far) of the surface at their pixels (0 = no object there)."""
+    inside, flat, z = pixels_of(v, points)
+    lo_img, hi_img = v.range_at(t)
+    lo = np.where(inside, lo_img.reshape(-1)[flat], 0.0)
+    hi = np.where(inside, hi_img.reshape(-1)[flat], 0.0)
+    return inside, z, lo, hi
+
+
+def step_cloud(views: list[InteractionView], t: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All views' measured points at step ``t``: points, unit normals (facing the camera), and
+    whether each point is in front of the closed state (moved in)."""
+    pts, nrm, moved = [], [], []
+    for v in views:
+        if t not in v.depth:
+            continue
+        d = v.depth[t]
+        P, N, ok = grid_points(v, d)
+        sel = ok.reshape(-1)
+        pts.append(P.reshape(-1, 3)[sel])
+        nrm.append(N.reshape(-1, 3)[sel])
+        ahead = (d > 0) & ((v.ref <= 0) | (d < v.ref - v.ref_threshold))
+        moved.append(ahead.reshape(-1)[sel])
+    if not pts:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, bool)
+    return np.concatenate(pts), np.concatenate(nrm), np.concatenate(moved)
+
+
+def grid_points(v: InteractionView, d: np.ndarray, step: int = 2
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World points (H,W,3) of a depth map, normals from neighbours ``step`` pixels away, valid."""
+    cam = v.rays * d[..., None]
+    c2w = np.linalg.inv(v.camera.w2c)
+    P = cam @ c2w[:3, :3].T + c2w[:3, 3]
+    du = np.zeros_like(P)
+    dv = np.zeros_like(P)
+    du[:, step:-step] = P[:, 2 * step:] - P[:, :-2 * step]
+    dv[step:-step] = P[2 * step:] - P[:-2 * step]
+    N = np.cross(du, dv)
+    n = np.linalg.norm(N, axis=-1, keepdims=True)
+    N = N / np.maximum(n, 1e-12)
+    towards = v.camera.center - P
+    N *= np.sign(np.sum(N * towards, axis=-1, keepdims=True) + 1e-12)
+    valid = d > 0
+    # normals only where the neighbourhood is one surface (no depth jumps)
+    dd = np.zeros_like(d)
+    for a, b in ((np.s_[:, step:-step], (np.s_[:, 2 * step:], np.s_[:, :-2 * step])),
+                 (np.s_[step:-step], (np.s_[2 * step:], np.s_[:-2 * step]))):
+        jump = np.maximum(np.abs(d[b[0]] - d[a]), np.abs(d[b[1]] - d[a]))
+        jump = np.where((d[b[0]] > 0) & (d[b[1]] > 0), jump, np.inf)
+        dd[a] = np.maximum(dd[a], jump)
+    dd[:, :step] = dd[:, -step:] = dd[:step] = dd[-step:] = np.inf
+    ok = valid & (n[..., 0] > 0) & (dd < 0.05 * np.maximum(d, 1e-3))
+    return P, N, ok

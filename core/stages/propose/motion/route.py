@@ -1,0 +1,92 @@
+"""The motion route: joints of the parts that move in the interaction frames (see the package
+docstring for the steps)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ....model.capture import Capture
+from ....model.joints import Joint
+from ....model.progress import QUIET, Progress
+from ....geometry.rigid import StepData, fit_joint
+from .assemble import finite, make_joint, refine_fit, snap_to_front, view_meta
+from .cameras import make_views, step_cloud
+from .change import floaters, mark_changed, moving_at, vanish_times
+from .config import MotionConfig
+from .parts import group_parts
+from .track import track_part, visible_filter
+
+
+def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.ndarray,
+                   render_depth, progress: Progress = QUIET,
+                   config: MotionConfig | None = None, robot_depth=None
+                   ) -> tuple[list[Joint], dict[str, Any]]:
+    """Joints of the parts that move in ``capture``'s interaction frames.
+
+    ``splat_means`` (N,3) and ``splat_opacity`` (N,) (0..1) are the static splat's Gaussians;
+    ``render_depth(camera) -> (H,W)`` renders the splat's depth (used only for cameras without a
+    time-0 frame); ``robot_depth(frame) -> (H,W) | None`` the robot twin's depth in a frame
+    (core/stages/robot_twin.py; None: no twin). Returns the joints (source ``motion``) and meta
+    with per-part diagnostics.
+    """
+    cfg = config or MotionConfig()
+    times = capture.times
+    progress.update("propose", 0.02, "closed state per interaction camera")
+    views = make_views(capture, render_depth, cfg, robot_depth)
+    pts = np.asarray(splat_means, float)[np.asarray(splat_opacity) >= cfg.min_opacity]
+    spacing = float(np.median(cKDTree(pts).query(pts, k=2)[0][:, 1])) if len(pts) > 1 else 0.01
+    pts = pts[~floaters(pts, capture.static, max(cfg.min_threshold, 1.5 * spacing))]
+    mark_changed(views, pts, spacing)
+    first, count, earliest = vanish_times(pts, views, times, spacing)
+    first[count < 2] = -1
+    min_points = max(cfg.min_part_points, int(cfg.min_part_fraction * len(pts)))
+    parts = group_parts(pts, first, moving_at(pts, views, times), times,
+                        cfg.link_pixels * spacing, min_points, earliest=earliest)
+    progress.update("propose", 0.1, f"{len(parts)} moving part(s)", parts=len(parts))
+
+    clouds = {}
+    for t in times:
+        P, N, moved = step_cloud(views, t)
+        clouds[t] = (P, N, cKDTree(P), moved)
+    rng = np.random.default_rng(0)
+    joints: list[Joint] = []
+    diagnostics = []
+    for k, idx in enumerate(parts):
+        S = pts[idx]
+        St = S[rng.choice(len(S), cfg.track_points, replace=False)] \
+            if len(S) > cfg.track_points else S
+        start = int(np.min(first[idx]))
+        track = track_part(St, views, times, start, clouds, cfg)
+        moving = [t for t in times if t >= start]
+        weights = np.array([max(track.score[t], 0.05) for t in moving])
+        fit = fit_joint(St, [track.transforms[t] for t in moving], cfg.min_angle_deg, weights,
+                        cfg.min_rms_ratio)
+        steps = [StepData(*clouds[t][:3], visible_filter(views, t)) for t in moving]
+        thr = float(np.median([v.threshold for v in views]))
+        fit = refine_fit(fit, St, steps, views, moving, thr, cfg)
+        snapped = None
+        if fit.type == "prismatic":
+            fit, snapped = snap_to_front(fit, S, cfg.front_snap_deg)
+        values = {t: 0.0 for t in times if t < start}
+        values.update({t: float(v) for t, v in zip(moving, fit.values)})
+        joint = make_joint(k, fit, values, moving, S, track, views, clouds)
+        joints.append(joint)
+        diagnostics.append({"name": joint.name, "points": int(len(S)), "first_step": start,
+                            "rms_revolute_mm": finite(1000 * fit.rms_revolute),
+                            "rms_prismatic_mm": finite(1000 * fit.rms_prismatic),
+                            "max_angle_deg": finite(fit.max_angle_deg),
+                            "snapped_to_front_deg": snapped,
+                            "score_min": finite(min(track.score[t] for t in moving)),
+                            "icp_rms_mm": finite(1000 * np.median([track.rms[t]
+                                                                    for t in moving]))})
+        progress.update("propose", 0.1 + 0.9 * (k + 1) / len(parts), f"part {k + 1}: {joint.type}")
+    meta = {"method": "motion",
+            "view": view_meta(views[0]) if views else None,
+            "cameras": [{"name": v.name, "closed_state": v.ref_source,
+                         "threshold_mm": 1000 * v.threshold,
+                         "closed_state_threshold_mm": 1000 * v.ref_threshold} for v in views],
+            "motion": diagnostics}
+    return joints, meta
