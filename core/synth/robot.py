@@ -219,7 +219,7 @@ class _Arm:
             e_new = self._error(T_new, G)
             if e_new @ e_new < e @ e:
                 q, T, z, o, e = q_new, T_new, z_new, o_new, e_new
-                lam2 *= 0.25
+                lam2 = max(lam2 * 0.25, 1e-6)   # J J^T has rank <= joints
             else:
                 lam2 *= 9.0
             if e @ e < 1e-10 or lam2 > 1e4:
