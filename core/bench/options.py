@@ -5,7 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ..model.categories import CATEGORIES, EXTRA_KINDS
-from ..model.registry import DEVICES, ROBOTS, option
+from ..model.registry import DEVICES, option
+from ..model.robots import ROBOTS
 from ..render.constants import LOW_PASS
 
 
@@ -55,6 +56,9 @@ class BenchProposeOptions:
     height: int = option(120, "generated sets: image height")
     iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
                              "depth-initialised splat)")
+    robot: str | None = option(None, "generated sets: also the same objects opened by this robot "
+                               "in view, scored with its twin and without (ablation)",
+                               choices=tuple(ROBOTS))
     device: str = option("auto", "where torch work runs", choices=DEVICES)
 
 

@@ -29,8 +29,8 @@ from .options import BenchProposeOptions
 from .sets import materialise, parse_set
 
 
-def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0
-                  ) -> dict:
+def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0,
+                  robot_twin: bool = True) -> dict:
     """Propose joints for one synthetic capture and score them against its gt.json.
 
     The static splat is the depth-initialised one, or optimised for ``iterations`` iterations.
@@ -47,7 +47,8 @@ def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iteration
     else:
         write_ply(out / "splat.ply", initial_splats(capture.static)[0])
     t0 = time.perf_counter()
-    art = propose(capture, out, QUIET, ProposeOptions(method="motion", device=device))
+    art = propose(capture, out, QUIET, ProposeOptions(method="motion", device=device,
+                                                      robot_twin=robot_twin))
     seconds = time.perf_counter() - t0
     scores = match_joints(art.joints, gt.joints)
     return {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name),
@@ -96,26 +97,44 @@ def bench_propose(args: BenchProposeOptions, progress: Progress) -> int:
     bset = parse_set(args.set, args.data)
     with tempfile.TemporaryDirectory(prefix="artgs-bench-propose-") as tmp:
         tmp = Path(tmp)
+        synth = dict(width=args.width, height=args.height, depth_noise=args.depth_noise,
+                     simultaneous=args.simultaneous)
         captures = materialise(bset, tmp / "data", per_category=args.per_category,
                                seed=args.seed, categories=args.category, progress=progress,
-                               marker="gt.json",
-                               width=args.width, height=args.height,
-                               depth_noise=args.depth_noise, simultaneous=args.simultaneous)
+                               marker="gt.json", **synth)
+        variants = [("", captures, True)]
+        if args.robot and bset.kind != "data":
+            robot_set = materialise(bset, tmp / "robot", per_category=args.per_category,
+                                    seed=args.seed, categories=args.category, progress=progress,
+                                    marker="gt.json", robot=args.robot, **synth)
+            variants += [(f"{args.robot} in view, with its twin", robot_set, True),
+                         (f"{args.robot} in view, without the twin (ablation)", robot_set, False)]
         progress.start("bench-propose", f"{len(captures)} captures")
-        results = []
-        for k, cap in enumerate(captures):
-            r = bench_capture(Path(cap), tmp / "out", args.device, args.iterations)
-            results.append(r)
-            worst = max((s["ae"] for s in r["scores"]), default=0.0)
-            progress.update("bench-propose", (k + 1) / len(captures), r["capture"],
-                            seconds=round(r["seconds"], 1), worst_ae=round(worst, 2))
-        rows = summarize(results)
+        tables = []
+        n = sum(len(c) for _, c, _ in variants)
+        done = 0
+        for title, caps, twin in variants:
+            results = []
+            for cap in caps:
+                r = bench_capture(Path(cap), tmp / f"out{done}", args.device, args.iterations,
+                                  robot_twin=twin)
+                results.append(r)
+                done += 1
+                worst = max((s["ae"] for s in r["scores"]), default=0.0)
+                progress.update("bench-propose", done / n, r["capture"],
+                                seconds=round(r["seconds"], 1), worst_ae=round(worst, 2))
+            tables.append((title, summarize(results), results))
         progress.finish("bench-propose", captures=len(captures))
     if progress.mode == "json":
-        progress.finished(rows=json.dumps(rows), results=json.dumps(results))
+        progress.finished(**{f"rows{k or ''}": json.dumps(rows)
+                             for k, (_, rows, _) in enumerate(tables)},
+                          results=json.dumps(tables[0][2]))
     else:
         print(f"set {bset.label}, seed {args.seed}, depth noise {args.depth_noise} m, "
               f"simultaneous {args.simultaneous}, splat iterations {args.iterations}, "
               f"{len(captures)} captures")
-        print(format_table(rows))
+        for title, rows, _ in tables:
+            if title:
+                print(f"\n{title}:")
+            print(format_table(rows))
     return 0
