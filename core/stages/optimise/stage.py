@@ -166,7 +166,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
         added = hypotheses.add_missed(run, share=0.05)
     if added and options.types:   # the new parts' types by the same evidence
         evidence.update(hypotheses.select_types(run, share=0.0,
-                                                fixed=[n not in added for n in model.names]))
+                                                fixed=[name not in added for name in model.names]))
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     losses = evaluate(model, frames, cfg)
     result = export(model, frames, joints, losses, evidence, cfg)
