@@ -319,7 +319,7 @@ def test_failing_capture_import_leaves_scene(scene, tmp_path, capture):
     assert "field 'fl_x'" in message and message in str(err.value)
     assert "Traceback" not in str(err.value)
     assert scene.artgs.capture.status == "FAILED" and _scene_state() == before
-    assert _preview_dirs() == temporary  # the temporary preview folder is gone
+    assert _preview_dirs() <= temporary  # ours is gone (others may come and go meanwhile)
 
 
 def _run(op, **kwargs) -> None:
@@ -425,8 +425,11 @@ def test_bad_splat_is_reported_in_blender_as_on_the_command_line(scene, tmp_path
                         quats=np.tile(np.float32([1, 0, 0, 0]), (n, 1)),
                         log_scales=np.full((n, 3), -4, np.float32),
                         opacity_logits=np.zeros(n, np.float32), sh=np.zeros((n, 1, 3), np.float32))
-    splat.means[11, 2] = np.inf
     write_ply(out / "splat.ply", splat)
+    data = bytearray((out / "splat.ply").read_bytes())   # z of Gaussian 11 := inf
+    start = data.index(b"end_header\n") + len(b"end_header\n") + 4 * (11 * 17 + 2)
+    data[start:start + 4] = np.float32(np.inf).tobytes()
+    (out / "splat.ply").write_bytes(bytes(data))
     (out / "proposals.json").write_text('{"frame": "world", "joints": [], "source": "user"}\n')
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     scene.artgs.capture_dir, scene.artgs.output_dir = str(capture), str(out)

@@ -41,17 +41,17 @@ def test_run_writes_every_output_and_finds_the_joints(cabinet, tmp_path):
     splat = read_ply(out / "splat.ply")
     assert splat.means.shape[0] > 1000 and splat.sh.shape[1:] in ((1, 3), (4, 3))
     art = read_articulation(out / "articulation.json")
-    proposals = read_articulation(out / "proposals.json")
-    assert [j.to_dict() for j in art.joints] == [j.to_dict() for j in proposals.joints]
-    assert art.meta["optimised"] is False and art.meta["source"] == "motion"
+    assert art.meta["optimised"] is True
+    assert (out / "part_labels.npy").is_file()
     gt = read_articulation(cabinet / "gt.json").joints
     for score in match_joints(art.joints, gt):
         assert score.type_correct and score.axis_error_deg < 3.0, score
         assert score.origin_error_cm is None or score.origin_error_cm < 3.0, score
     report = json.loads((out / "report.json").read_text())
     assert report["capture"] == str(cabinet.resolve())
-    assert {"reconstruct", "propose", "run"} <= set(report["stages"])
-    assert all(report["stages"][s]["seconds"] > 0 for s in ("reconstruct", "propose", "run"))
+    assert {"reconstruct", "propose", "optimise", "run"} <= set(report["stages"])
+    assert all(report["stages"][s]["seconds"] > 0
+               for s in ("reconstruct", "propose", "optimise", "run"))
     assert not [p for p in out.iterdir() if p.name.startswith(".")]    # no temp files left
 
 

@@ -58,6 +58,11 @@ class ReconstructOptions:
     max_side: int = _max_side()
 
 
+def _robot_twin() -> Any:
+    return option(True, "explain the robot arm's pixels by its twin (the robot's Gaussians posed "
+                  "by robot_joint_positions); --no-robot-twin for the ablation", shared=True)
+
+
 @dataclass
 class ProposeOptions:
     """Options of ``artgs propose``."""
@@ -71,6 +76,7 @@ class ProposeOptions:
     vlm_timeout: float = option(60.0, "seconds for each VLM request, retries included",
                                 shared=True)
     max_side: int = _max_side()
+    robot_twin: bool = _robot_twin()
 
 
 @dataclass
@@ -85,6 +91,7 @@ class OptimiseOptions:
     seed: int = option(0, "random seed of the frame sampling")
     device: str = _device()
     max_side: int = _max_side()
+    robot_twin: bool = _robot_twin()
 
 
 @dataclass

@@ -72,3 +72,15 @@ class Gaussians:
         from ..model.ply import SplatArrays
         return SplatArrays(**{f.name: getattr(self, f.name).detach().cpu().numpy()
                               .astype(np.float32) for f in fields(self)})
+
+
+def concat(*splats: Gaussians) -> Gaussians:
+    """Several splats as one (e.g. the object's and a robot twin's, rendered together); SH
+    coefficients are padded with zeros to the largest degree."""
+    k = max(g.sh.shape[1] for g in splats)
+
+    def pad(sh: torch.Tensor) -> torch.Tensor:
+        return torch.cat([sh, sh.new_zeros(sh.shape[0], k - sh.shape[1], 3)], 1)
+    return Gaussians(*(torch.cat([getattr(g, f) for g in splats]) for f in
+                       ("means", "quats", "log_scales", "opacity_logits")),
+                     torch.cat([pad(g.sh) for g in splats]))

@@ -25,12 +25,15 @@ from ..geometry.kinematics import link_poses
 from ..model.capture import Capture, Frame
 from ..model.robots import RobotModel, robot_model
 from ..render.gaussians import Gaussians
+from ..render.rasterize import render
 from ..render.sh import rgb_to_sh0
 from ..sim.robot_assets import load_chain, robot_urdf, sample_link_surfaces
 from .reconstruct import normal_quats
 
 #: Mean distance between the twin's Gaussians (m): a pixel at 1.5 m is ~9 mm wide at 160x120.
 SPACING = 0.008
+#: Disc standard deviation in spacings: discs overlap, so no back face shows through.
+SCALE = 0.6
 _OPACITY = 0.95
 _FLAT = 0.1
 
@@ -48,7 +51,7 @@ class RobotTwin:
         self.points = np.concatenate(pts).astype(np.float64)
         self.quats = normal_quats(np.concatenate([surfaces[k].normals for k in self.links]))
         colours = np.concatenate([surfaces[k].colors for k in self.links])
-        s = np.log(0.6 * spacing)
+        s = np.log(SCALE * spacing)
         n = len(self.points)
         self.log_scales = np.tile([s, s, s + np.log(_FLAT)], (n, 1))
         self.opacity_logits = np.full(n, np.log(_OPACITY / (1 - _OPACITY)))
@@ -108,13 +111,20 @@ def twin_for_capture(capture: Capture, device="cpu", spacing: float = SPACING
     return pose
 
 
-def concat(*splats: Gaussians) -> Gaussians:
-    """Several splats as one (e.g. the object's and the robot's, rendered together); SH degrees
-    are padded with zeros to the largest."""
-    k = max(g.sh.shape[1] for g in splats)
+def twin_depth_for_capture(capture: Capture, device="cpu", spacing: float = SPACING
+                           ) -> Callable[[Frame], np.ndarray | None] | None:
+    """``depth(frame)``: the twin's rendered depth (H,W) in the frame (0 where its alpha is below
+    0.5; None for frames without joint positions); None without a twin (see
+    :func:`twin_for_capture`). What the motion route's change detection takes."""
+    twin = twin_for_capture(capture, device, spacing)
+    if twin is None:
+        return None
 
-    def pad(sh: torch.Tensor) -> torch.Tensor:
-        return torch.cat([sh, sh.new_zeros(sh.shape[0], k - sh.shape[1], 3)], 1)
-    return Gaussians(*(torch.cat([getattr(g, f) for g in splats]) for f in
-                       ("means", "quats", "log_scales", "opacity_logits")),
-                     torch.cat([pad(g.sh) for g in splats]))
+    def depth(frame: Frame) -> np.ndarray | None:
+        g = twin(frame)
+        if g is None:
+            return None
+        with torch.no_grad():
+            res = render(g, frame.camera)
+        return np.where(res.alpha.cpu().numpy() > 0.5, res.depth.cpu().numpy(), 0.0)
+    return depth

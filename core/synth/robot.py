@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
+from scipy.linalg import solve
 from scipy.spatial.transform import Rotation
 
 from ..geometry.kinematics import joint_motion
@@ -126,24 +127,26 @@ def _placements(spec: ObjectSpec, schedule: list[dict[str, float]], targets: lis
     facing = np.eye(4)
     facing[:3, :3] = np.stack([-front, -side, [0.0, 0.0, 1.0]], axis=1)   # base x at the object
     points = np.array([G[:3, 3] for G in targets])
-    closed = points[0]
     shoulder = model.mdh[0][2]
+    grid = np.array([(d, s, h) for d in np.arange(0.2, 1.01, 0.05)
+                     for s in np.arange(-0.6, 0.61, 0.1) for h in np.arange(0.0, 0.71, 0.1)])
+    origins = points[0] + np.outer(grid[:, 0], front) + np.outer(grid[:, 1], side)
+    origins[:, 2] = np.maximum(0.0, points[:, 2].mean() - shoulder - grid[:, 2])
+    r = np.linalg.norm(points[None] - (origins + [0.0, 0.0, shoulder])[:, None], axis=2)
+    reach = np.max(np.maximum(r - _REACH[1], 0) + np.maximum(_REACH[0] - r, 0), axis=1)
+    heights = np.linspace(0.0, shoulder, 4)
+    column = (origins[:, None] + heights[None, :, None] * [0.0, 0.0, 1.0]).reshape(-1, 3)
     boxes = [b for state in schedule[::max(1, len(schedule) // 8)] + schedule[-1:]
              for b in spec.boxes_at(state)]
-    scored = []
-    for d in np.arange(0.2, 1.01, 0.05):
-        for s in np.arange(-0.6, 0.61, 0.1):
-            for h in np.arange(0.0, 0.71, 0.1):
-                base = facing.copy()
-                base[:3, 3] = closed + d * front + s * side
-                base[2, 3] = max(0.0, float(points[:, 2].mean()) - shoulder - h)
-                r = np.linalg.norm(points - (base[:3, 3] + [0.0, 0.0, shoulder]), axis=1)
-                reach = float(np.max(np.maximum(r - _REACH[1], 0) + np.maximum(_REACH[0] - r, 0)))
-                column = base[:3, 3] + np.outer(np.linspace(0.0, shoulder, 4), [0.0, 0.0, 1.0])
-                clear = float(box_distance(column, boxes).min())
-                scored.append((reach + 2 * max(0.0, _CLEARANCE - clear), float(np.mean(r)), base))
-    scored.sort(key=lambda x: (round(x[0], 3), x[1]))
-    return [b for *_, b in scored]
+    clear = box_distance(column, boxes).reshape(len(grid), len(heights)).min(axis=1)
+    score = np.round(reach + 2 * np.maximum(0.0, _CLEARANCE - clear), 3)
+    order = np.lexsort((r.mean(axis=1), score))
+    out = []
+    for k in order:
+        base = facing.copy()
+        base[:3, 3] = origins[k]
+        out.append(base)
+    return out
 
 
 class _Arm:
@@ -209,13 +212,14 @@ class _Arm:
             J = np.concatenate([np.cross(z, T[:3, 3] - o).T,
                                 self.W_APPROACH * np.cross(z, T[:3, 2]).T,
                                 -self.W_FINGERS * (np.cross(z, T[:3, 1]) @ fingers)[None]])
-            dq = J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(len(e)), e)
+            # scipy, not numpy: numpy's small dense solve is slow once torch is loaded
+            dq = J.T @ solve(J @ J.T + lam2 * np.eye(len(e)), e, assume_a="pos")
             q_new = np.clip(q + dq, self.lower, self.upper)
             T_new, z_new, o_new = self._fk(base, q_new)
             e_new = self._error(T_new, G)
             if e_new @ e_new < e @ e:
                 q, T, z, o, e = q_new, T_new, z_new, o_new, e_new
-                lam2 *= 0.25
+                lam2 = max(lam2 * 0.25, 1e-6)   # J J^T has rank <= joints
             else:
                 lam2 *= 9.0
             if e @ e < 1e-10 or lam2 > 1e4:
@@ -248,23 +252,26 @@ class _Arm:
 
 
 class RobotInScene:
-    """The planned robot loaded into a render client (core/synth/render.py's Scene); out of sight
-    (far below the floor) until :meth:`show`."""
+    """The planned robot in a render client (core/sim/client.py's Scene), loaded at its first
+    :meth:`show` (the static views come first and must not see it). Loaded at the base pose
+    rather than moved there: PyBullet's base reset places the base's centre of mass, not its
+    link frame."""
 
     def __init__(self, client: int, plan: RobotPlan) -> None:
         self.client, self.plan = client, plan
         self.chain = load_chain(robot_urdf(plan.model))
-        self.body = p.loadURDF(str(robot_urdf(plan.model)), [0.0, 0.0, -1000.0],
-                               useFixedBase=True, physicsClientId=client)
-        self.index = {p.getJointInfo(self.body, k, physicsClientId=client)[1].decode(): k
-                      for k in range(p.getNumJoints(self.body, physicsClientId=client))}
+        self.body: int | None = None
+        self.index: dict[str, int] = {}
 
     def show(self, time: int) -> list[float]:
         """Pose the robot for interaction ``time``; returns its joint positions for the frame."""
-        base = self.plan.base_pose
-        p.resetBasePositionAndOrientation(self.body, base[:3, 3].tolist(),
-                                          Rotation.from_matrix(base[:3, :3]).as_quat().tolist(),
-                                          physicsClientId=self.client)
+        if self.body is None:
+            base = self.plan.base_pose
+            self.body = p.loadURDF(str(robot_urdf(self.plan.model)), base[:3, 3].tolist(),
+                                   Rotation.from_matrix(base[:3, :3]).as_quat().tolist(),
+                                   useFixedBase=True, physicsClientId=self.client)
+            self.index = {p.getJointInfo(self.body, k, physicsClientId=self.client)[1].decode(): k
+                          for k in range(p.getNumJoints(self.body, physicsClientId=self.client))}
         q = self.plan.positions[time]
         values = dict(zip(self.chain.actuated, q))
         for j in self.chain.joints:

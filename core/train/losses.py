@@ -70,12 +70,19 @@ def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb:
     pixels that stay wrong whatever the parameters do, so their gradient fades. Summed over the
     image and divided by the object pixels; plus ``λ_ssim (1 − SSIM)`` over the pixels with
     r < 1.
+
+    Where ``v.occluder_depth`` shows something that is not the object (an arm, a hand), a render
+    whose surface there lies behind it (or is empty) is not compared: the object is hidden there.
     """
     colour = (r.rgb - v.rgb).abs().mean(-1) / sigma_rgb
     depth = torch.where(v.depth_valid, (r.depth - v.depth).abs() / (sigma_depth * depth_unit),
                         torch.zeros_like(r.depth))
     alpha = (r.alpha - v.mask).abs() / sigma_alpha
     res = colour + depth + alpha
+    if v.occluder_depth is not None:
+        occ = v.occluder_depth
+        hidden = (occ > 0) & ((r.depth <= 0) | (r.depth > occ - sigma_depth * depth_unit))
+        res = torch.where(hidden.detach(), torch.zeros_like(res), res)
     loss = (res / (1 + res)).sum() / v.pixels
     if lambda_ssim:
         loss = loss + lambda_ssim * (1 - ssim(r.rgb, v.rgb, (res.detach() < 1).float()))

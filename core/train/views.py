@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -24,6 +25,10 @@ class View:
     depth: torch.Tensor     # (H,W) metres, 0 = no measurement
     depth_valid: torch.Tensor  # (H,W) bool: measured and inside the mask
     pixels: int             # object pixels (at least 1)
+    # known occluders (core/stages/optimise/occluders.py): Gaussians rendered with the model (a
+    # robot twin), and the depth of other things in front that are not the object (0 = none)
+    occluder: Any = None
+    occluder_depth: torch.Tensor | None = None
 
 
 def make_view(index: int, f: Frame, device: torch.device) -> View:

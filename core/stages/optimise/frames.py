@@ -44,14 +44,20 @@ def downsample(v: View) -> View:
     full = cover > 0.999
     K = v.K.clone()
     K[:2] *= 0.5  # pixel centres at +0.5 (the rasterizer's convention): a plain scaling
+    occ = v.occluder_depth
+    if occ is not None:   # the nearest occluder of each block
+        near = -F.max_pool2d(torch.where(occ[crop] > 0, -occ[crop], -torch.inf)[None, None], 2)[0, 0]
+        occ = torch.where(torch.isfinite(near), near, torch.zeros_like(near))
     return replace(v, K=K, width=w, height=h, rgb=rgb, mask=mask,
                    depth=torch.where(full, depth, torch.zeros_like(depth)), depth_valid=full,
-                   pixels=max(int((mask > 0.5).sum()), 1))
+                   pixels=max(int((mask > 0.5).sum()), 1), occluder_depth=occ)
 
 
-def interaction_frames(capture: Capture, device: torch.device, min_size: int = 24) -> FrameSet:
+def interaction_frames(capture: Capture, device: torch.device, min_size: int = 24,
+                       occluders=None) -> FrameSet:
     """All interaction frames with a time (checked by ``stage.check``: there are some, all with
-    depth); pyramid levels while the image stays >= ``min_size``."""
+    depth); pyramid levels while the image stays >= ``min_size``. ``occluders(frame, view) ->
+    view`` adds known occluders to each view (core/stages/optimise/occluders.py)."""
     frames = [f for f in capture.interaction if f.time is not None]
     times = sorted({int(f.time) for f in frames})
     cams: list[bytes] = []
@@ -62,6 +68,8 @@ def interaction_frames(capture: Capture, device: torch.device, min_size: int = 2
             cams.append(key)
         cam_idx.append(cams.index(key))
     level = [make_view(i, f, device) for i, f in enumerate(frames)]
+    if occluders is not None:
+        level = [occluders(f, v) for f, v in zip(frames, level)]
     levels = [level]
     while min(level[0].width, level[0].height) // 2 >= min_size:
         level = [downsample(v) for v in level]

@@ -17,6 +17,7 @@ import torch
 from scipy.spatial import cKDTree
 
 from ...model.joints import Joint
+from ...render.gaussians import Gaussians, concat
 from ...render.rasterize import rasterize
 from .kinematics import PRISMATIC, REVOLUTE, joint_motions, skin
 
@@ -134,9 +135,14 @@ class ArticulatedSplat:
         return skin(s.means, s.quats, self.weights(), R, t, q)
 
     def render(self, view, ti: int, backend: str = "auto"):
+        """The posed splat at time index ``ti`` seen by ``view``, with the view's known occluder
+        Gaussians (a robot twin) rendered in."""
         means, quats = self.posed(ti)
         s = self.splat
-        return rasterize(means, quats, s.log_scales, s.opacity_logits, s.sh, view.K, view.w2c,
+        g = Gaussians(means, quats, s.log_scales, s.opacity_logits, s.sh)
+        if view.occluder is not None:
+            g = concat(g, view.occluder)
+        return rasterize(g.means, g.quats, g.log_scales, g.opacity_logits, g.sh, view.K, view.w2c,
                          view.width, view.height, None, backend)
 
     # --- regularisers --------------------------------------------------------------------------

@@ -38,6 +38,7 @@ from ...model.registry import OptimiseOptions
 from ...render.device import resolve_device
 from .fit import FitConfig, evaluate, fit, search_states
 from .frames import FrameSet, interaction_frames
+from .occluders import known_occluders
 from .model import ArticulatedSplat, Splat
 from .kinematics import REVOLUTE
 
@@ -123,7 +124,8 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     t0 = time.perf_counter()
     dev = resolve_device(options.device)
     torch.manual_seed(options.seed)
-    frames = interaction_frames(capture, dev)
+    frames = interaction_frames(capture, dev, occluders=known_occluders(capture, dev,
+                                                                       options.robot_twin))
     splat = Splat.from_arrays(arrays, dev)
     size = object_size(arrays.means)
     joints = list(proposals.joints)

@@ -69,7 +69,7 @@ def propose(capture: Capture, out: str | Path, progress: Progress,
         opacity = 1.0 / (1.0 + np.exp(-np.asarray(arrays.opacity_logits, float)))
         joints, meta = propose_motion(capture, arrays.means, opacity,
                                       lambda camera: _render_depth(arrays, camera, options.device),
-                                      progress)
+                                      progress, robot_depth=_robot_depth(capture, options))
     else:
         from ...render.gaussians import Gaussians
         from .vlm.propose import propose_vlm
@@ -95,6 +95,15 @@ def run(out: Path, capture: Capture, options: ProposeOptions, progress: Progress
     articulation = propose(capture, out, progress, options)
     return {"joints": len(articulation.joints), "method": options.method,
             "types": [j.type for j in articulation.joints]}
+
+
+def _robot_depth(capture: Capture, options: ProposeOptions):
+    """The robot twin's depth per frame (core/stages/robot_twin.py), or None without a twin."""
+    if not options.robot_twin:
+        return None
+    from ...render.device import resolve_device
+    from ..robot_twin import twin_depth_for_capture
+    return twin_depth_for_capture(capture, resolve_device(options.device))
 
 
 def _render_depth(arrays, camera, device: str) -> np.ndarray:

@@ -17,18 +17,20 @@ import numpy as np
 from scipy.ndimage import minimum_filter
 
 from ....model.cameras import Camera
+from ....geometry.occlusion import object_depth
 from ....model.capture import Capture, Frame
 from .config import CLOSED_TIME, MotionConfig
 
 
 @dataclass
 class InteractionView:
-    """One fixed interaction camera: its depth per step, masks, and closed-state depth."""
+    """One fixed interaction camera: its object depth per step, free space per step (see
+    :func:`object_depth`), and closed-state depth."""
 
     name: str
     camera: Camera
     depth: dict[int, np.ndarray]
-    mask: dict[int, np.ndarray | None]
+    free: dict[int, np.ndarray]
     ref: np.ndarray
     ref_source: str
     threshold: float = 0.0            # change threshold between measurements (m)
@@ -45,6 +47,18 @@ class InteractionView:
             d = self.depth[t]
             self.ranges[key] = (d > 0) & ((self.ref <= 0) | (d < self.ref - self.ref_threshold))
         return self.ranges[key]
+
+    def free_near(self, t: int) -> np.ndarray:
+        """Free space (:func:`object_depth`) that a pixel's whole 3x3 neighbourhood agrees on."""
+        key = f"free{t}"
+        if key not in self.ranges:
+            self.ranges[key] = minimum_filter(self.free[t], size=3, mode="nearest")
+        return self.ranges[key]
+
+    def occluder(self, t: int) -> np.ndarray:
+        """Depth of something in front that is not the object (robot, hand), inf where none."""
+        f = self.free[t]
+        return np.where((f > 0) & np.isfinite(f), f, np.inf)
 
     def nearest_at(self, t: int) -> np.ndarray:
         """Nearest valid depth in each pixel's 3x3 neighbourhood at step ``t`` (0: none)."""
@@ -91,19 +105,23 @@ def group_views(frames: list[Frame]) -> list[list[Frame]]:
     return [sorted(g, key=lambda f: f.time) for g in groups]
 
 
-def make_views(capture: Capture, render_depth, config: MotionConfig) -> list[InteractionView]:
+def make_views(capture: Capture, render_depth, config: MotionConfig, robot_depth=None
+               ) -> list[InteractionView]:
     """Views of the interaction cameras; ``render_depth(camera) -> (H,W)`` gives the closed state
-    where a camera has no time-0 frame."""
+    where a camera has no time-0 frame; ``robot_depth(frame) -> (H,W) | None`` the robot twin's
+    depth (0 where it does not cover the pixel; see :func:`object_depth`)."""
     t0 = CLOSED_TIME
     views = []
     for k, g in enumerate(group_views(capture.interaction)):
-        depth = {f.time: masked_depth(f) for f in g}
-        mask = {f.time: f.mask for f in g}
+        depth, free = {}, {}
+        for f in g:
+            depth[f.time], free[f.time] = object_depth(
+                f, None if robot_depth is None else robot_depth(f), config.min_threshold)
         if g[0].time == t0:
             ref, source = depth[t0], g[0].file_path
         else:
             ref, source = render_depth(g[0].camera).astype(np.float32), "splat"
-        v = InteractionView(f"cam{k}", g[0].camera, depth, mask, ref, source)
+        v = InteractionView(f"cam{k}", g[0].camera, depth, free, ref, source)
         v.threshold, v.ref_threshold = _thresholds(v, config, source == "splat")
         v.rays = g[0].camera.pixel_rays()
         views.append(v)

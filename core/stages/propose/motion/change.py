@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 
 from ....model.capture import Frame
 from .cameras import InteractionView, depth_range, grid_points, lookup, masked_depth, pixels_of
+from .config import CLOSED_TIME
 
 
 def mark_changed(views: list[InteractionView], points: np.ndarray, spacing: float) -> None:
@@ -35,31 +36,52 @@ def mark_changed(views: list[InteractionView], points: np.ndarray, spacing: floa
 
 
 def vanish_times(points: np.ndarray, views: list[InteractionView], times: list[int], spacing: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per point: first step at which a view sees through it (-1: never), and how many times.
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per point: first step at which a view sees through it (-1: never), how many times, and
+    the earliest step it may have vanished at: before its first step, the steps in which every
+    view that saw it closed had something in front of it (an arm, or an opened part) and an arm
+    hid it in some view (then, or in the closed state) leave the onset open. Without an arm
+    (nothing outside the masks in front of the object) the onset is the first step.
     ``spacing``: the points' typical spacing (m)."""
     first = np.full(len(points), -1, np.int64)
     count = np.zeros(len(points), np.int64)
+    hidden = np.ones((len(points), len(times)), bool)
+    behind_arm = np.zeros((len(points), len(times)), bool)
     for v in views:
         inside, z, lo, hi = lookup(v, "ref", points)
+        flat = pixels_of(v, points)[1]
         if v.ref_source == "splat":   # splat points scatter about a spacing around surfaces
             seen = _front_points(v, points, spacing) & (z < hi + v.ref_threshold)
             margin = max(v.threshold, 1.5 * spacing)
         else:
             seen = inside & (lo > 0) & (z > lo - v.threshold) & (z < hi + v.threshold)
             margin = v.threshold
-        for t in times:
+        for k, t in enumerate(times):
             if t not in v.depth:
                 continue
             _, _, d, _ = lookup(v, t, points)
+            occ = np.where(inside, v.occluder(t).reshape(-1)[flat], np.inf)
+            hidden[:, k] &= ~seen | (occ < z - margin) | ((d > 0) & (d < z - margin))
+            behind_arm[:, k] |= occ < z - margin
+            if CLOSED_TIME in v.free:   # an arm hid it in the closed state: this view's onset
+                closed = np.where(inside, v.occluder(CLOSED_TIME).reshape(-1)[flat], np.inf)
+                behind_arm[:, k] |= closed < z - margin
             # background where the part was counts only against a measured closed state (the
-            # render's silhouette is blurred: points at its rim would all seem gone)
-            empty = (d <= 0) & (v.mask[t] is not None) & (v.ref_source != "splat")
+            # render's silhouette is blurred: points at its rim would all seem gone); an arm in
+            # front of the point says nothing (cameras.object_depth)
+            free = np.where(inside, v.free[t].reshape(-1)[flat], 0.0)
+            empty = (d <= 0) & (z < free - margin) & (v.ref_source != "splat")
             gone = seen & ((d - z > margin) | empty)
             count += gone
             new = gone & ((first < 0) | (first > t))
             first[new] = t
-    return first, count
+    hidden &= behind_arm
+    step = {t: k for k, t in enumerate(times)}
+    onset = np.array([step.get(int(t), 0) for t in first])
+    for k in range(len(times) - 1, 0, -1):   # walk back over hidden steps
+        back = (onset == k) & hidden[:, k - 1] & (first >= 0)
+        onset[back] = k - 1
+    return first, count, np.array(times)[onset]
 
 
 def _front_points(v: InteractionView, points: np.ndarray, spacing: float) -> np.ndarray:

@@ -9,7 +9,8 @@ from scipy.spatial import cKDTree
 
 
 def group_parts(points: np.ndarray, first: np.ndarray, active: np.ndarray, times: list[int],
-                radius: float, min_points: int, onset_ratio: float = 2.5) -> list[np.ndarray]:
+                radius: float, min_points: int, onset_ratio: float = 2.5,
+                earliest: np.ndarray | None = None) -> list[np.ndarray]:
     """Index arrays of moving parts, largest first.
 
     Vanished points within ``radius`` of each other are linked when they first vanish at the same
@@ -17,20 +18,22 @@ def group_parts(points: np.ndarray, first: np.ndarray, active: np.ndarray, times
     :func:`change.moving_at`): a door's hinge side vanishes steps after its edge. A group whose
     count of newly vanished points jumps by ``onset_ratio`` from one step to the next holds a second
     part starting there (a neighbouring drawer opened after the door); the links across that step
-    are cut.
+    are cut. ``earliest`` (from :func:`change.vanish_times`): a point hidden by an arm may have
+    vanished as early as this step, so it links with points vanishing from there to its first step.
     """
     idx = np.flatnonzero(first >= 0)
     if len(idx) == 0:
         return []
     step = {t: k for k, t in enumerate(times)}
     f = np.array([step[t] for t in first[idx]], np.int64)   # step indices (times may skip)
+    lo = f if earliest is None else np.array([step[t] for t in earliest[idx]], np.int64)
     pairs = cKDTree(points[idx]).query_pairs(radius, output_type="ndarray")
     if len(pairs):
         a, b = pairs[:, 0], pairs[:, 1]
         swap = f[a] > f[b]
         a, b = np.where(swap, b, a), np.where(swap, a, b)
-        gap = f[b] - f[a]
-        keep = (gap == 0) | ((gap == 1) & active[idx[a], f[b]])
+        gap = np.maximum(lo[b] - f[a], 0)
+        keep = (gap == 0) | ((gap == 1) & active[idx[a], np.minimum(lo[b], len(times) - 1)])
         pairs = np.stack([a, b], axis=1)[keep]
     labels = _components(len(idx), pairs)
     if len(pairs):

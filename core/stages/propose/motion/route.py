@@ -22,26 +22,29 @@ from .track import track_part, visible_filter
 
 def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.ndarray,
                    render_depth, progress: Progress = QUIET,
-                   config: MotionConfig | None = None) -> tuple[list[Joint], dict[str, Any]]:
+                   config: MotionConfig | None = None, robot_depth=None
+                   ) -> tuple[list[Joint], dict[str, Any]]:
     """Joints of the parts that move in ``capture``'s interaction frames.
 
     ``splat_means`` (N,3) and ``splat_opacity`` (N,) (0..1) are the static splat's Gaussians;
     ``render_depth(camera) -> (H,W)`` renders the splat's depth (used only for cameras without a
-    time-0 frame). Returns the joints (source ``motion``) and meta with per-part diagnostics.
+    time-0 frame); ``robot_depth(frame) -> (H,W) | None`` the robot twin's depth in a frame
+    (core/stages/robot_twin.py; None: no twin). Returns the joints (source ``motion``) and meta
+    with per-part diagnostics.
     """
     cfg = config or MotionConfig()
     times = capture.times
     progress.update("propose", 0.02, "closed state per interaction camera")
-    views = make_views(capture, render_depth, cfg)
+    views = make_views(capture, render_depth, cfg, robot_depth)
     pts = np.asarray(splat_means, float)[np.asarray(splat_opacity) >= cfg.min_opacity]
     spacing = float(np.median(cKDTree(pts).query(pts, k=2)[0][:, 1])) if len(pts) > 1 else 0.01
     pts = pts[~floaters(pts, capture.static, max(cfg.min_threshold, 1.5 * spacing))]
     mark_changed(views, pts, spacing)
-    first, count = vanish_times(pts, views, times, spacing)
+    first, count, earliest = vanish_times(pts, views, times, spacing)
     first[count < 2] = -1
     min_points = max(cfg.min_part_points, int(cfg.min_part_fraction * len(pts)))
     parts = group_parts(pts, first, moving_at(pts, views, times), times,
-                        cfg.link_pixels * spacing, min_points)
+                        cfg.link_pixels * spacing, min_points, earliest=earliest)
     progress.update("propose", 0.1, f"{len(parts)} moving part(s)", parts=len(parts))
 
     clouds = {}

@@ -53,7 +53,7 @@ def projective_score(points: np.ndarray, T: np.ndarray, views: list[InteractionV
         # contradictions only where the whole 3x3 neighbourhood agrees (edges are ambiguous)
         near = np.where(inside, v.nearest_at(t).reshape(-1)[flat], 0.0)
         wrong |= (inside & (near > 0) & (z < near - v.threshold)) \
-            | (inside & (near <= 0) & (v.mask[t] is not None))
+            | (inside & (near <= 0) & (z < v.free_near(t).reshape(-1)[flat] - v.threshold))
     return float(np.where(best > 0, best, -wrong.astype(float)).sum()) / max(len(Y), 1)
 
 
@@ -90,7 +90,8 @@ def visible_filter(views: list[InteractionView], t: int):
             if t not in v.depth:
                 continue
             inside, z, _, hi = lookup(v, t, points)
-            ok |= inside & ((hi <= 0) | (z - hi < v.threshold))
+            occ = np.where(inside, v.occluder(t).reshape(-1)[pixels_of(v, points)[1]], np.inf)
+            ok |= inside & (((hi <= 0) & (z < occ + v.threshold)) | (z - hi < v.threshold))
         return ok
     return keep
 
