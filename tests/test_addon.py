@@ -91,7 +91,8 @@ def scene(addon):
     bpy.ops.wm.read_homefile(use_empty=True)
     prefs = preferences.get()
     prefs.engine_python, prefs.preview_cap, prefs.vlm_api_key = "", 200_000, ""
-    return bpy.context.scene
+    yield bpy.context.scene
+    prefs.engine_python = ""  # the choice is kept in engine.json: later tests get the default
 
 
 @pytest.fixture(scope="module")
