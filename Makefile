@@ -9,7 +9,7 @@ DEMO_OUT ?= out/demo
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e ".[bpy,test]"
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e ".[bpy,test,batch]"
 	touch $(STAMP)
 
 env: $(STAMP)

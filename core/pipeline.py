@@ -21,6 +21,7 @@ from .model.outdir import claim_out
 from .model.joints import Articulation, read_articulation, write_articulation
 from .model.progress import Progress
 from .model.registry import StageSpec
+from .resume import resume_since, stage_finished
 
 
 def resolve(ref: str) -> Callable[..., Any]:
@@ -86,21 +87,22 @@ def _run_stage(spec: StageSpec, out: Path, options: Any, progress: Progress,
 
 
 def run(capture_dir: str | Path, out: str | Path, progress: Progress,
-        options: dict[str, Any] | None = None) -> Articulation:
+        options: dict[str, Any] | None = None, *, resume: bool = False) -> Articulation:
     """Every registered stage in order on one capture; returns the articulation in OUT.
 
     ``options``: per stage name, its options dataclass (defaults for the others). Every stage's
     check runs before the first stage starts. While no stage writes ``articulation.json``, the
-    proposals are written as it, marked ``"optimised": false``.
+    proposals are written as it, marked ``"optimised": false``. ``resume``: a stage already
+    finished in OUT for this capture (:func:`core.resume.stage_finished`) is not run again.
     """
     options = {s.name: (options or {}).get(s.name) or s.options() for s in registry.STAGES}
     out = Path(out)
     with claim_out(out, "artgs run"):
-        return _run(Path(capture_dir), out, progress, options)
+        return _run(Path(capture_dir), out, progress, options, resume)
 
 
-def _run(capture_dir: Path, out: Path, progress: Progress,
-         options: dict[str, Any]) -> Articulation:
+def _run(capture_dir: Path, out: Path, progress: Progress, options: dict[str, Any],
+         resume: bool) -> Articulation:
     start = time.perf_counter()
     progress.start("validate", "checking the capture")
     max_side = next((m for m in map(_max_side, options.values()) if m is not None), None)
@@ -110,7 +112,11 @@ def _run(capture_dir: Path, out: Path, progress: Progress,
         check_stage(spec, capture, options[spec.name])
     progress.finish("validate", frames=len(capture.frames), interaction=len(capture.interaction))
 
+    since = resume_since(out, capture_dir) if resume else None
     for spec in registry.STAGES:
+        if since is not None and stage_finished(spec, out, since):
+            progress.log(f"{spec.name}: already done, skipped")
+            continue
         run_stage(spec, out, options[spec.name], progress, capture=capture)
 
     if registry.producer_of(layout.ARTICULATION) is None:

@@ -32,6 +32,8 @@ from artgs.core.model.protocol import EXIT_BAD_INPUT, EXIT_CANCELLED, EXIT_FAILE
 from artgs.core.stages.reconstruct import reconstruct
 from artgs.core.synth.generate import generate_object
 
+from test_fuzz_inputs import poke_ply  # noqa: E402 - tests/ is on sys.path under pytest
+
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p),
        "OMP_WAIT_POLICY": "PASSIVE"}
 
@@ -90,9 +92,7 @@ def out(done, tmp_path) -> Path:
 # --- splat.ply -----------------------------------------------------------------------------------
 
 def test_splat_with_nan_positions_is_refused_naming_element_and_field(out):
-    splat = read_ply(out / layout.SPLAT)
-    splat.means[7, 1] = np.nan
-    write_ply(out / layout.SPLAT, splat)
+    poke_ply(out / layout.SPLAT, 7, "y", np.nan)
     before = snapshot(out)
     res = artgs("propose", str(out))
     refused(res, EXIT_BAD_INPUT, "splat.ply", "vertex[7]", "field 'y'")
@@ -415,3 +415,21 @@ def test_temporaries_are_only_removed_under_the_lock(tmp_path):
         p.write_text("x")
     assert sorted(remove_stale_temporaries(tmp_path)) == sorted([Path(tmp), Path(part)])
     assert all(p.exists() for p in keep)
+
+
+def test_reconstruction_that_ends_empty_or_diverged_keeps_the_last_splat():
+    from artgs.core.model.errors import ArtgsError, NothingFound
+    from artgs.core.model.ply import SplatArrays
+    from artgs.core.stages.reconstruct import _refuse_unusable
+    n = 3
+    ok = SplatArrays(np.zeros((n, 3), np.float32), np.tile(np.float32([1, 0, 0, 0]), (n, 1)),
+                     np.full((n, 3), -3, np.float32), np.zeros(n, np.float32),
+                     np.zeros((n, 4, 3), np.float32))
+    _refuse_unusable(ok, 10)
+    empty = SplatArrays(ok.means[:0], ok.quats[:0], ok.log_scales[:0], ok.opacity_logits[:0],
+                        ok.sh[:0])
+    with pytest.raises(NothingFound, match="no Gaussians after 10 iterations.*left as it was"):
+        _refuse_unusable(empty, 10)
+    ok.sh[1, 2, 0] = np.nan
+    with pytest.raises(ArtgsError, match=r"diverged after 10 iterations \(Gaussian 1's sh is nan"):
+        _refuse_unusable(ok, 10)

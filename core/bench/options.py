@@ -49,3 +49,39 @@ class BenchProposeOptions:
     iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
                              "depth-initialised splat)")
     device: str = option("auto", "where torch work runs", choices=DEVICES)
+
+
+@dataclass
+class BenchOptimiseOptions:
+    """``artgs bench-optimise``: joint accuracy without and with the optimisation; basin rate."""
+
+    data: str | None = option(None, "benchmark set from `artgs synth` (default: generate one)")
+    per_category: int = option(1, "objects per category (generated sets)")
+    seed: int = option(0, "seed of the generated set")
+    category: list[str] | None = option(None, "generated sets: only these categories",
+                                        choices=CATEGORIES)
+    width: int = option(160, "generated sets: image width")
+    height: int = option(120, "generated sets: image height")
+    iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
+                             "depth-initialised splat)")
+    opt_iterations: int = option(300, "steps of the main articulation fit")
+    basin: int = option(0, "perturbed-start runs per capture (10-30 deg, 5-15 cm) for the basin "
+                        "rate")
+    device: str = option("auto", "where torch work runs", choices=DEVICES)
+
+
+@dataclass
+class BenchBatchOptions:
+    """``artgs bench-batch``: captures per hour of ``artgs batch`` per worker count."""
+
+    data: str | None = option(None, "folder of capture folders (default: generate --count)")
+    count: int = option(4, "generated sets: captures (the seven categories in turn)")
+    seed: int = option(0, "generated sets: seed")
+    width: int = option(160, "generated sets: image width")
+    height: int = option(120, "generated sets: image height")
+    static_views: int = option(24, "generated sets: static views")
+    iterations: int | None = option(None, "reconstruction iteration cap (default: until converged)")
+    workers: list[int] = field(default_factory=lambda: [1, 2],
+                               metadata={"help": "worker counts to time"})
+    ray: bool = option(False, "run the batches on a private local Ray instead of the process pool")
+    device: str = option("auto", "where torch work runs", choices=DEVICES)

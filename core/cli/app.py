@@ -17,7 +17,7 @@ from ..model import protocol, registry
 from ..model.errors import ArtgsError, InputError
 from ..model.interrupt import cancel_on_signals, ignore_further_interrupts, interrupted
 from ..model.progress import Progress
-from . import bench, capture_preview, check_env, contact_sheet, run, stage, synth, validate
+from . import batch, bench, capture_preview, check_env, contact_sheet, run, stage, synth, validate
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -37,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The full argument parser (also used by the docs test)."""
     parser = argparse.ArgumentParser(prog="artgs", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (synth, validate, capture_preview, run):
+    for module in (synth, validate, capture_preview, run, batch):
         _tool(sub, module)
     for spec in registry.STAGES:
         _common(stage.add_parser(sub, spec))
@@ -73,6 +73,11 @@ def _run(args: argparse.Namespace, progress: Progress) -> int:
             return protocol.EXIT_CANCELLED
         if isinstance(exc, ArtgsError):
             progress.error(str(exc))
+            return protocol.EXIT_FAILED
+        if isinstance(exc, OSError) and exc.strerror:   # disk full, permissions changed, ...
+            where = f"{exc.filename}: " if exc.filename else ""
+            progress.error(f"{where}{exc.strerror}; files in the output folder are as before "
+                           "the failed write")
             return protocol.EXIT_FAILED
         raise
     return int(code or 0)

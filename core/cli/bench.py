@@ -27,6 +27,11 @@ BENCHMARKS = (
               bench_options.BenchReconstructOptions, "bench.reconstruct:bench_reconstruct"),
     Benchmark("bench-propose", "proposal accuracy per category (motion route)",
               bench_options.BenchProposeOptions, "bench.propose:bench_propose"),
+    Benchmark("bench-optimise", "joint accuracy per category without and with the "
+              "optimisation; basin rate from perturbed starts",
+              bench_options.BenchOptimiseOptions, "bench.optimise:bench_optimise"),
+    Benchmark("bench-batch", "batch throughput: captures per hour for 1, 2, … local workers",
+              bench_options.BenchBatchOptions, "bench.batch:bench_batch"),
 )
 
 

@@ -11,6 +11,7 @@ import argparse
 from collections import Counter
 from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
 from ..model import registry
 from ..model.progress import Progress
@@ -28,6 +29,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """CAPTURE, --out and every stage's options."""
     p.add_argument("capture")
     p.add_argument("--out", required=True, help="output folder")
+    add_stage_options(p)
+
+
+def add_stage_options(p: argparse.ArgumentParser) -> None:
+    """Every stage's options (also ``artgs batch``'s)."""
     counts = Counter(f.name for s in registry.STAGES for f in fields(s.options)
                      if not f.metadata.get("shared"))
     added: set[str] = set()
@@ -45,17 +51,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             add_field(group, spec.options, f.name, flags=flags, dest=dest)
 
 
-def run(args: argparse.Namespace, progress: Progress) -> int:
-    """Run the pipeline and print the joints it ended with."""
-    from ..pipeline import run as run_pipeline
-
+def stage_options(args: argparse.Namespace) -> dict[str, Any]:
+    """Per stage name, its options dataclass from the flags of :func:`add_stage_options`."""
     options = {}
     for spec in registry.STAGES:
         shared = {f.name for f in fields(spec.options) if f.metadata.get("shared")}
         options[spec.name] = build(spec.options, args,
                                    lambda n, s=spec.name, sh=shared: _dest(s, n, n in sh))
+    return options
+
+
+def run(args: argparse.Namespace, progress: Progress) -> int:
+    """Run the pipeline and print the joints it ended with."""
+    from ..pipeline import run as run_pipeline
+
     out = Path(args.out)
-    articulation = run_pipeline(Path(args.capture), out, progress, options)
+    articulation = run_pipeline(Path(args.capture), out, progress, stage_options(args))
     progress.finished(out=str(out), joints=[j.name for j in articulation.joints],
                       files=sorted(p.name for p in out.iterdir() if not p.name.startswith(".")))
     if progress.mode == "text":

@@ -202,7 +202,7 @@ def prismatic_axis(camera: Camera, box: np.ndarray, plane: Plane) -> np.ndarray:
 
 
 def extent(camera: Camera, box: np.ndarray, plane: Plane) -> dict[str, list]:
-    """The part's oriented box (``core.joints`` ``extent``): front rectangle, thin in depth."""
+    """The part's oriented box (``model.joints`` ``extent``): front rectangle, thin in depth."""
     center, h, v, size = box_frame(camera, box, plane)
     n = plane.normal
     v = _unit(v - (v @ h) * h)

@@ -5,7 +5,7 @@ with numpy. The file (written atomically) holds, per frame in file order: ``K`` 
 ``c2w`` (F,4,4, OpenGL axes), ``width``/``height`` (F,), ``phase`` (F,) text, ``time`` (F,)
 (-1 where there is none) and ``file_path`` (F,) text; the point preview: ``points`` (N,3) float32
 world metres, ``colors`` (N,3) uint8 sRGB, ``radius`` (N,) float32 metres, ``points_total`` (the
-points available before the cap); and ``summary`` (the JSON text of ``core.capture.summarize``).
+points available before the cap); and ``summary`` (the JSON text of ``model.capture.summarize``).
 No pickled objects: ``np.load(..., allow_pickle=False)`` reads it.
 """
 

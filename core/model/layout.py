@@ -13,6 +13,7 @@ from .jsonio import read_json_object
 SPLAT = "splat.ply"
 PROPOSALS = "proposals.json"
 ARTICULATION = "articulation.json"
+PART_LABELS = "part_labels.npy"   # int32 part of every splat.ply Gaussian: 0 base, k = joint k
 PARTS_DIR = "parts"
 URDF = "model.urdf"
 REPORT = "report.json"

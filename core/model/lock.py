@@ -19,6 +19,7 @@ from typing import IO, Iterator
 from .errors import InputError
 
 LOCK = ".artgs.lock"
+_WINDOWS_LOCK_OFFSET = 1 << 30
 _held: dict[Path, int] = {}   # locks this process holds -> nesting depth (``run`` holds, stages nest)
 
 
@@ -73,9 +74,9 @@ def _acquire(path: Path) -> IO[str]:
 
 def _try_lock(f: IO[str]) -> bool:
     try:
-        if sys.platform == "win32":
+        if sys.platform == "win32":   # one byte far past the text, which stays readable
             import msvcrt
-            f.seek(0)
+            f.seek(_WINDOWS_LOCK_OFFSET)
             msvcrt.locking(f.fileno(), msvcrt.LK_NBLCK, 1)
         else:
             import fcntl

@@ -59,6 +59,29 @@ class SplatArrays:
         """SH degree (0..3)."""
         return int(round(np.sqrt(self.sh.shape[1]))) - 1
 
+    def first_invalid(self) -> tuple[str, int, int, str] | None:
+        """The first value no splat can hold, as (array, Gaussian, column, why), else None:
+        a non-finite number, a zero quaternion (no rotation; column 0), or a log scale whose
+        variance ``exp(2 s)`` overflows float32."""
+        arrays = {"means": self.means, "quats": self.quats, "log_scales": self.log_scales,
+                  "opacity_logits": self.opacity_logits.reshape(-1, 1),
+                  "sh": self.sh.reshape(len(self), 3 * self.sh.shape[1])}
+        for name, a in arrays.items():
+            bad = ~np.isfinite(a)
+            if bad.any():
+                row, col = np.argwhere(bad)[0]
+                return name, int(row), int(col), f"is {a[row, col]} (not a finite float32)"
+        zero = ~(np.abs(self.quats) > 0).any(axis=1)
+        if zero.any():
+            return ("quats", int(np.argmax(zero)), 0,
+                    "is the zero quaternion (rot_0..rot_3 all 0), which is no rotation")
+        big = self.log_scales > _MAX_LOG_SCALE
+        if big.any():
+            row, col = np.argwhere(big)[0]
+            return ("log_scales", int(row), int(col), f"has log scale {self.log_scales[row, col]:g}"
+                    f" > {_MAX_LOG_SCALE:g} (its covariance overflows float32)")
+        return None
+
     def validate(self) -> None:
         """Raise ValueError if the array shapes do not fit together."""
         n = self.means.shape[0]
@@ -75,8 +98,15 @@ class SplatArrays:
 
 
 def write_ply(path: str | Path, splats: SplatArrays) -> None:
-    """Write ``splats`` to ``path`` in the standard 3DGS layout, atomically."""
+    """Write ``splats`` to ``path`` in the standard 3DGS layout, atomically.
+
+    Raises ValueError (before touching ``path``) for values :func:`read_ply` would refuse.
+    """
     splats.validate()
+    invalid = splats.first_invalid()
+    if invalid is not None:
+        name, row, col, why = invalid
+        raise ValueError(f"SplatArrays.{name}[{row}, {col}] {why}")
     n, k = len(splats), splats.sh.shape[1]
     names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
     names += [f"f_rest_{i}" for i in range(3 * (k - 1))]
@@ -128,7 +158,6 @@ def read_ply(path: str | Path) -> SplatArrays:
         raise InputError(path, "holds no Gaussians (element vertex 0)", field="vertex")
     table = structured_to_unstructured(_read_vertex(path, fmt, elements, header_len),
                                        dtype=np.float32)
-    _check_values(path, table, names)
     column = {name: i for i, name in enumerate(names)}
 
     def cols(*keys: str) -> np.ndarray:
@@ -140,33 +169,24 @@ def read_ply(path: str | Path) -> SplatArrays:
     if n_rest:
         rest = cols(*[f"f_rest_{i}" for i in range(n_rest)]).reshape(count, 3, k - 1)
         sh[:, 1:] = np.transpose(rest, (0, 2, 1))
-    return SplatArrays(means=cols("x", "y", "z"), quats=cols("rot_0", "rot_1", "rot_2", "rot_3"),
-                       log_scales=cols("scale_0", "scale_1", "scale_2"),
-                       opacity_logits=table[:, column["opacity"]].copy(), sh=sh)
+    splats = SplatArrays(means=cols("x", "y", "z"), quats=cols("rot_0", "rot_1", "rot_2", "rot_3"),
+                         log_scales=cols("scale_0", "scale_1", "scale_2"),
+                         opacity_logits=table[:, column["opacity"]].copy(), sh=sh)
+    invalid = splats.first_invalid()
+    if invalid is not None:
+        array, row, col, why = invalid
+        raise InputError(path, f"element vertex[{row}] {why}", field=_field_name(array, col, k))
+    return splats
 
 
-def _check_values(path: Path, table: np.ndarray, names: list[str]) -> None:
-    """Refuse values no splat can hold, naming the first bad Gaussian (element index) and field:
-    non-finite numbers (or ones that overflow float32), a zero quaternion (no rotation) and log
-    scales whose covariance ``exp(2 scale)`` overflows float32."""
-    used = [i for i, name in enumerate(names) if name in _REQUIRED or name.startswith("f_rest_")]
-    bad = ~np.isfinite(table[:, used])
-    if bad.any():
-        row, col = np.argwhere(bad)[0]
-        raise InputError(path, f"element vertex[{row}] is {table[row, used[col]]} (not a finite "
-                         "float32)", field=names[used[col]])
-    quats = table[:, [names.index(f"rot_{i}") for i in range(4)]]
-    zero = ~(np.abs(quats) > 0).any(axis=1)
-    if zero.any():
-        raise InputError(path, f"element vertex[{int(np.argmax(zero))}] has the zero quaternion "
-                         "(rot_0..rot_3 all 0), which is no rotation", field="rot_0")
-    scales = table[:, [names.index(f"scale_{i}") for i in range(3)]]
-    big = scales > _MAX_LOG_SCALE
-    if big.any():
-        row, col = np.argwhere(big)[0]
-        raise InputError(path, f"element vertex[{row}] has log scale {scales[row, col]:g} > "
-                         f"{_MAX_LOG_SCALE:g} (its covariance overflows float32)",
-                         field=f"scale_{col}")
+def _field_name(array: str, col: int, k: int) -> str:
+    """The PLY property holding column ``col`` of SplatArrays' ``array`` (K SH coefficients)."""
+    if array == "sh":
+        coeff, channel = divmod(col, 3)
+        return f"f_dc_{channel}" if coeff == 0 else f"f_rest_{channel * (k - 1) + coeff - 1}"
+    return {"means": ("x", "y", "z"), "quats": tuple(f"rot_{i}" for i in range(4)),
+            "log_scales": tuple(f"scale_{i}" for i in range(3)),
+            "opacity_logits": ("opacity",)}[array][col]
 
 
 def _read_header(path: Path, f) -> tuple[str, list, int]:
@@ -222,6 +242,10 @@ def _read_vertex(path: Path, fmt: str, elements: list, header_len: int) -> np.nd
     count, props = next((c, p) for n, c, p in elements if n == "vertex")
     if endian is None:
         dtype = np.dtype([(p, kind) for p, kind in props])
+        size = path.stat().st_size - header_len
+        if count * len(props) * 2 > size:   # each value takes at least a digit and a separator
+            raise InputError(path, f"file is truncated: {size} bytes of ASCII data cannot hold "
+                             f"the {count} vertices the header promises", field="vertex")
         with open(path, "rb") as f:
             f.seek(header_len)
             try:

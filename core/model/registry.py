@@ -73,6 +73,20 @@ class ProposeOptions:
     max_side: int = _max_side()
 
 
+@dataclass
+class OptimiseOptions:
+    """Options of ``artgs optimise``."""
+
+    iterations: int = option(300, "steps of the main fit (the later phases take fractions of it)")
+    types: bool = option(True, "choose each joint's type by fitting both hypotheses (--no-types: "
+                         "keep the proposals' types)")
+    parts: bool = option(True, "remove parts the frames do not show moving (--no-parts: keep "
+                         "every proposed part)")
+    seed: int = option(0, "random seed of the frame sampling")
+    device: str = _device()
+    max_side: int = _max_side()
+
+
 @dataclass(frozen=True)
 class StageSpec:
     """One pipeline stage (see the module docstring)."""
@@ -95,6 +109,11 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec("propose", "Bones", "initial joints -> OUT/proposals.json",
               reads=(layout.SPLAT,), writes=(layout.PROPOSALS,), options=ProposeOptions,
               run="stages.propose.stage:run", check="stages.propose.stage:check"),
+    StageSpec("optimise", "Optimise", "fit joints, states and parts to the interaction frames "
+              "-> OUT/articulation.json, OUT/part_labels.npy",
+              reads=(layout.SPLAT, layout.PROPOSALS),
+              writes=(layout.ARTICULATION, layout.PART_LABELS), options=OptimiseOptions,
+              run="stages.optimise.stage:run", check="stages.optimise.stage:check"),
 )
 
 

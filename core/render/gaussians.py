@@ -62,13 +62,13 @@ class Gaussians:
     @classmethod
     def from_arrays(cls, arrays: Any, device: torch.device | str = "cpu",
                     dtype: torch.dtype = torch.float32) -> "Gaussians":
-        """From a ``core.ply.SplatArrays`` (or any object with the same numpy attributes)."""
+        """From a ``core.model.ply.SplatArrays`` (or any object with the same numpy attributes)."""
         def t(name: str) -> torch.Tensor:
             return torch.as_tensor(np.asarray(getattr(arrays, name)), dtype=dtype, device=device)
         return cls(**{f.name: t(f.name) for f in fields(cls)})
 
     def to_arrays(self):
-        """As a ``core.ply.SplatArrays`` of float32 numpy arrays."""
+        """As a ``core.model.ply.SplatArrays`` of float32 numpy arrays."""
         from ..model.ply import SplatArrays
         return SplatArrays(**{f.name: getattr(self, f.name).detach().cpu().numpy()
                               .astype(np.float32) for f in fields(self)})

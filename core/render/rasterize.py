@@ -87,7 +87,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor
 
 
 def render(gaussians, camera, background=None, backend: str = "auto") -> RenderOutput:
-    """Render ``gaussians`` (core.gaussians.Gaussians) with a ``core.cameras.Camera``."""
+    """Render ``gaussians`` (render.gaussians.Gaussians) with a ``model.cameras.Camera``."""
     g = gaussians
     return rasterize(g.means, g.quats, g.log_scales, g.opacity_logits, g.sh, camera.K,
                      camera.w2c, camera.width, camera.height, background, backend)

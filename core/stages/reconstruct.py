@@ -34,7 +34,7 @@ import torch
 
 from ..model import layout
 from ..model.capture import Capture, Frame
-from ..model.errors import InputError
+from ..model.errors import ArtgsError, InputError, NothingFound
 from ..model.memory import available_bytes, gigabytes
 from ..model.ply import SplatArrays, write_ply
 from ..model.progress import Progress
@@ -309,6 +309,7 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
                    plateau=plateau, figures=trainer.figures)
 
     result = trainer.splat()
+    _refuse_unusable(result, run.iterations)
     figures: dict[str, Any] = {
         "iterations": run.iterations, "stopped": run.stopped, "gaussians": len(result),
         "initial_gaussians": len(trainer.init),
@@ -322,6 +323,20 @@ def reconstruct(capture: Capture, out: str | Path, progress: Progress, *,
     write_ply(Path(out) / layout.SPLAT, result)
     figures["seconds"] = round(time.perf_counter() - t0, 2)
     return figures
+
+
+def _refuse_unusable(result: SplatArrays, iterations: int) -> None:
+    """A splat with no Gaussians or with values no splat can hold is not written over the last
+    good splat.ply: the stage fails, saying what happened."""
+    kept = f"{layout.SPLAT} is left as it was"
+    if len(result) == 0:
+        raise NothingFound(f"reconstruction ended with no Gaussians after {iterations} "
+                           f"iterations (all pruned); {kept}. Check the masks and depth units")
+    invalid = result.first_invalid()
+    if invalid is not None:
+        name, row, _, why = invalid
+        raise ArtgsError(f"reconstruction diverged after {iterations} iterations (Gaussian "
+                         f"{row}'s {name} {why}); {kept}")
 
 
 def check(capture: Capture, options: ReconstructOptions) -> None:

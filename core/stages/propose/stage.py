@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from ...model import layout
-from ...model.capture import TRANSFORMS, Capture
+from ...model.capture import Capture
+from ...model.transforms import TRANSFORMS
 from ...model.errors import InputError, NothingFound
 from ...model.joints import Articulation, write_articulation
 from ...model.ply import read_ply

@@ -41,7 +41,7 @@ COORDS = ("auto", "grid1000", "pixels", "unit")
 class VlmConfig:
     """Where and how to ask the VLM.
 
-    ``coords`` says how bare coordinate lists in answers are read (see ``core.vlm_parse``):
+    ``coords`` says how bare coordinate lists in answers are read (see ``vlm.parse``):
     ``auto`` (default), ``grid1000`` (InternVL), ``pixels`` (Qwen2.5-VL) or ``unit`` (0..1).
     ``width`` x ``height`` is the rendered view sent with each question (multiples of 28 suit
     InternVL's 448 px tiles and Qwen's 28 px patches).

@@ -1,6 +1,6 @@
 """The three questions asked to the vision-language model (ArtGS paper, Table "VQA tasks").
 
-All prompt text lives here. The answers are read by ``core.vlm_parse``, which accepts the paper's
+All prompt text lives here. The answers are read by ``vlm.parse``, which accepts the paper's
 free-text template as well as InternVL ``<box>`` answers and Qwen2.5-VL JSON, so the wording can be
 changed freely. Boxes sent to the model (the part box in :data:`HANDLE`) use InternVL's convention:
 ``<box>[[x1, y1, x2, y2]]</box>`` on a 0-1000 grid over the image width and height.

@@ -1,9 +1,9 @@
 """Joint proposals from a vision-language model (ArtGS paper, "VLM-based Bones Reasoning").
 
 1. Render a frontal RGB-D view of the static splat (:func:`frontal_camera`).
-2. Ask the three questions of ``core.vlm_prompts`` (classification, bones reasoning, then the
-   handle within each part's box) through ``core.vlm_client``; read them with ``core.vlm_parse``.
-3. Lift each part's image answer to a 3D joint with the rendered depth (``core.lift``).
+2. Ask the three questions of ``vlm.prompts`` (classification, bones reasoning, then the
+   handle within each part's box) through ``vlm.client``; read them with ``vlm.parse``.
+3. Lift each part's image answer to a 3D joint with the rendered depth (``core.geometry.lift``).
 
 A part whose answer cannot be used is skipped with a logged reason; the others are kept.
 """

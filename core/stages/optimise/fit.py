@@ -1,0 +1,144 @@
+"""Fitting an :class:`ArticulatedSplat` to the interaction frames by differentiable rendering.
+
+Each step renders every fixed camera at one random interaction time and descends
+``image_loss`` (robust depth) + regularisers with Adam; the first ``coarse`` fraction of the steps
+renders at the pyramid's coarsest level, which widens the basin (a wrong start still overlaps its
+target at low resolution), the rest at full resolution. Only the joints in ``free`` move.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import torch
+
+from ...train.adam import Adam
+from ...train.losses import robust_image_loss
+from .frames import FrameSet
+from .model import ArticulatedSplat
+
+
+@dataclass
+class FitConfig:
+    """Loss weights and learning rates of the articulation fit."""
+
+    lambda_ssim: float = 0.2
+    sigma_rgb: float = 0.1             # per-pixel error scales of the robust loss
+    sigma_depth: float = 2.0           # x 1 % of the object size
+    sigma_alpha: float = 0.5
+    lambda_smooth: float = 0.05        # kNN smoothness of the skinning weights
+    lambda_entropy: float = 0.02       # low entropy: parts are rigid
+    lambda_temporal: float = 0.02      # squared state change between consecutive times
+    lambda_prior: float = 0.0          # pull towards the start, x per-joint trust
+    lr_axes: float = 0.01
+    lr_origins: float = 0.004          # x object size
+    lr_states: float = 0.01
+    lr_logits: float = 0.1
+    lr_final: float = 0.05             # learning rates decay exponentially to this fraction
+    widen: float = 10.0                # robust sigmas at the start of the coarse phase, x
+    coarse: float = 0.4                # fraction of the first fit's steps at the coarsest level
+    backend: str = "auto"
+
+
+def frame_loss(model: ArticulatedSplat, frames: FrameSet, level: int, i: int,
+               cfg: FitConfig, widen: float = 1.0) -> torch.Tensor:
+    """Image loss of frame ``i`` at pyramid ``level``; ``widen`` scales the robust loss's
+    sigmas (large: L1-like, every pixel pulls)."""
+    v = frames.levels[level][i]
+    r = model.render(v, frames.time_index[i], cfg.backend)
+    return robust_image_loss(r, v, depth_unit=0.01 * model.size, sigma_rgb=cfg.sigma_rgb * widen,
+                             sigma_depth=cfg.sigma_depth * widen,
+                             sigma_alpha=cfg.sigma_alpha * widen, lambda_ssim=cfg.lambda_ssim)
+
+
+@torch.no_grad()
+def evaluate(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, level: int = 0,
+             subset: list[int] | None = None) -> np.ndarray:
+    """Image loss of every frame (or ``subset``) at ``level``, no regularisers."""
+    ids = range(len(frames.time_index)) if subset is None else subset
+    return np.array([float(frame_loss(model, frames, level, i, cfg)) for i in ids])
+
+
+def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
+        rng: np.random.Generator, *, free: list[bool] | None = None,
+        times: list[int] | None = None, prior: torch.Tensor | None = None,
+        tick: Callable[[int, float], None] | None = None, coarse: float = 0.0,
+        lr_scale: float = 1.0) -> float:
+    """Run ``steps`` Adam steps; returns the mean loss of the last quarter of them.
+
+    ``free``: joints that move (default all); ``times``: time indices to sample (default all);
+    ``prior``: per-joint strength of the pull towards the start; ``tick(step, loss)`` is called
+    every step (progress and cancel); ``coarse``: fraction of the steps at the coarsest level;
+    ``lr_scale``: multiplies the learning rates (refining phases start below the first fit's
+    rates: Adam's steps are about the learning rate whatever the gradient, so a converged
+    solution restarted at full rate would wander off).
+    """
+    if steps <= 0 or model.k == 0:
+        return float("nan")
+    dev = model.axes.device
+    size = model.size
+    lrs = {"axes": cfg.lr_axes * lr_scale, "origins": cfg.lr_origins * size * lr_scale,
+           "states": cfg.lr_states * lr_scale, "logits": cfg.lr_logits}
+    params = model.params()
+    opt = Adam(params, {k: lrs[k] for k in params}, eps=1e-12)
+    model.load(opt.params)
+    mask = torch.ones(model.k, device=dev) if free is None else \
+        torch.tensor(free, dtype=torch.float32, device=dev)
+    pool = list(range(len(frames.times))) if times is None else list(times)
+    coarse_level = len(frames.levels) - 1
+    losses: list[float] = []
+    for step in range(steps):
+        decay = cfg.lr_final ** (step / steps)
+        for name in opt.lrs:
+            opt.lrs[name] = lrs[name] * decay
+        in_coarse = step < coarse * steps
+        level = coarse_level if in_coarse else 0
+        # graduated robustness: the coarse phase starts L1-like (wide basin) and tightens
+        widen = cfg.widen ** (1 - step / (coarse * steps)) if in_coarse else 1.0
+        ti = int(rng.choice(pool))
+        ids = frames.at_time(ti)
+        loss = sum(frame_loss(model, frames, level, i, cfg, widen) for i in ids) / max(len(ids), 1)
+        smooth, entropy = model.skin_regularisers()
+        loss = loss + cfg.lambda_smooth * smooth + cfg.lambda_entropy * entropy \
+            + cfg.lambda_temporal * model.temporal()
+        if prior is not None and cfg.lambda_prior:
+            loss = loss + cfg.lambda_prior * model.prior(prior)
+        opt.zero_grad()
+        loss.backward()
+        for name in ("axes", "origins", "states"):
+            g = opt.params[name].grad
+            if g is not None:
+                g.mul_(mask.view(-1, *([1] * (g.ndim - 1))))
+        opt.step()
+        model.load(opt.params)
+        losses.append(float(loss.detach()))
+        if tick is not None:
+            tick(step, losses[-1])
+    model.load({k: v.detach() for k, v in opt.params.items()})
+    tail = losses[-max(1, steps // 4):]
+    return float(np.mean(tail))
+
+
+@torch.no_grad()
+def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitConfig,
+                  candidates: np.ndarray) -> None:
+    """Set joint ``k``'s state at every moving time to the candidate value (rad / m) with the
+    lowest image loss at the coarsest level (others as they are)."""
+    level = len(frames.levels) - 1
+    unit = model.unit_of(model.types[k])
+    states = model.states.clone()
+    for ti, t in enumerate(frames.times):
+        if t == 0:
+            continue
+        ids = frames.at_time(ti)
+        best, best_v = np.inf, 0.0
+        for v in candidates:
+            model.states[k, ti] = float(v) / unit
+            loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids)
+            if loss < best:
+                best, best_v = loss, float(v)
+        states[k, ti] = best_v / unit
+        model.states[k, ti] = states[k, ti]
+    model.states = states

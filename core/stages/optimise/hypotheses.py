@@ -1,0 +1,309 @@
+"""Choosing, adding and dropping joints by evidence (the image loss), beyond the paper.
+
+- Type: for each joint, hypotheses of the other type are made from its part (box edges as
+  hinges, box axes as slides, and the fitted motion transferred), scored by rendering, the best
+  one fitted, and the type with the lower image loss over the frames where the part moves is kept.
+- Spurious parts: a part whose removal (its Gaussians to the base) does not raise the image loss
+  over all frames is removed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from .fit import evaluate, search_states
+from .kinematics import PRISMATIC, REVOLUTE
+from .model import ArticulatedSplat
+
+#: Relative loss increase below which a part's removal is taken (float noise of the evaluation).
+REMOVE_TOL = 1e-3
+
+
+def state_candidates(model: ArticulatedSplat, k: int) -> np.ndarray:
+    """Values searched for a joint without states: ±120° in 15° steps, or ±40 % of the object
+    size in 5 % steps."""
+    if model.types[k] == REVOLUTE:
+        return np.radians(np.linspace(-120, 120, 17))
+    return np.linspace(-0.4, 0.4, 17) * model.size
+
+
+def _snapshot(model: ArticulatedSplat) -> tuple:
+    return (list(model.types), model.axes.detach().clone(), model.origins.detach().clone(),
+            model.states.detach().clone())
+
+
+def _restore(model: ArticulatedSplat, snap: tuple) -> None:
+    model.types = list(snap[0])
+    model.axes, model.origins, model.states = (t.clone() for t in snap[1:])
+
+
+def part_points(model: ArticulatedSplat, k: int, limit: int = 400) -> np.ndarray:
+    """Canonical means of part ``k``'s Gaussians (an even subsample of at most ``limit``)."""
+    pts = model.splat.means.cpu().numpy()[model.labels() == k + 1].astype(float)
+    return pts[:: max(1, len(pts) // limit)]
+
+
+def posed_part(model: ArticulatedSplat, k: int, pts: np.ndarray) -> np.ndarray:
+    """Part ``k``'s points moved by its current joint at every time: (T, M, 3)."""
+    from ...model.joints import joint_transform
+    axis = model.joint_axes()[k].detach().cpu().numpy()
+    origin = model.joint_origins()[k].detach().cpu().numpy()
+    out = []
+    for t, v in model.joint_values(k).items():
+        T = joint_transform(model.types[k], axis, origin, v)
+        out.append(pts @ T[:3, :3].T + T[:3, 3])
+    return np.stack(out)
+
+
+def part_normal(model: ArticulatedSplat, k: int) -> np.ndarray:
+    """Mean surface normal of part ``k``: each Gaussian's shortest axis, signs aligned."""
+    s = model.splat
+    sel = torch.as_tensor(model.labels() == k + 1, device=s.means.device)
+    q = s.quats[sel] / s.quats[sel].norm(dim=-1, keepdim=True)
+    w, x, y, z = q.unbind(-1)
+    R = torch.stack([torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                     torch.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                     torch.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)],
+                    -2)
+    shortest = s.log_scales[sel].argmin(-1)
+    n = R[torch.arange(len(q)), :, shortest].cpu().numpy().astype(float)
+    # principal direction of the normals (sign-free), as the eigenvector of their scatter
+    return np.linalg.eigh(n.T @ n)[1][:, -1]
+
+
+def box_edges(pts: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The 12 edges of the part's PCA box (2–98 % percentiles) as (direction, point) lines."""
+    c = pts.mean(0)
+    _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
+    local = (pts - c) @ vt.T
+    lo, hi = np.percentile(local, 2, axis=0), np.percentile(local, 98, axis=0)
+    lines = []
+    for a in range(3):
+        b, d = [i for i in range(3) if i != a]
+        for sb in (lo[b], hi[b]):
+            for sd in (lo[d], hi[d]):
+                p = c + sb * vt[b] + sd * vt[d] + 0.5 * (lo[a] + hi[a]) * vt[a]
+                lines.append((vt[a].copy(), p))
+    return lines
+
+
+def revolute_from_motion(pts: np.ndarray, posed: np.ndarray, axis: np.ndarray, point: np.ndarray
+                         ) -> tuple[np.ndarray, float]:
+    """Per-time angles about the line (axis, point) that best reproduce ``posed`` (T, M, 3), and
+    the mean squared point residual (m^2)."""
+    grid = np.radians(np.linspace(-120, 120, 241))
+    x = pts - point
+    par = (x @ axis)[:, None] * axis
+    perp = x - par
+    cross = np.cross(axis, perp)
+    values, err = [], 0.0
+    for Y in posed:
+        # R(θ)x = par + cos θ perp + sin θ (a × perp): residual for every grid angle at once
+        moved = (par[None] + np.cos(grid)[:, None, None] * perp[None]
+                 + np.sin(grid)[:, None, None] * cross[None]) + point
+        res = ((moved - Y[None]) ** 2).sum(-1).mean(-1)
+        i = int(np.argmin(res))
+        values.append(grid[i])
+        err += float(res[i])
+    return np.array(values), err / len(posed)
+
+
+def alternatives(model: ArticulatedSplat, k: int) -> list[tuple[str, np.ndarray, np.ndarray,
+                                                               np.ndarray | None]]:
+    """Hypotheses of the other type for joint ``k``: (type, axis, point, values per time or None).
+
+    Revolute -> prismatic: the principal direction of the part's fitted mean displacements (with
+    its values), the part's mean surface normal (drawers slide along their front's normal), the
+    part box's and the object box's axes. Prismatic -> revolute: every edge of the part's
+    box as a hinge, with the per-time angles that best reproduce the fitted part positions.
+    """
+    pts = part_points(model, k)
+    if len(pts) < 10:
+        return []
+    posed = posed_part(model, k, pts)
+    if model.types[k] == REVOLUTE:
+        disp = (posed - pts[None]).mean(1)                        # (T,3) best translations
+        _, _, vt = np.linalg.svd(disp, full_matrices=False)
+        axis = vt[0]
+        values = disp @ axis
+        if values[np.argmax(np.abs(values))] < 0:
+            axis, values = -axis, -values
+        directions = [axis, part_normal(model, k)]
+        for p in (pts, model.splat.means.cpu().numpy()):   # the part's and the object's box axes
+            directions += list(np.linalg.svd(p - p.mean(0), full_matrices=False)[2])
+        return [(PRISMATIC, d, pts.mean(0), values if i == 0 else None)
+                for i, d in enumerate(directions)]
+    hyps = []
+    for axis, point in box_edges(pts):
+        values, _ = revolute_from_motion(pts, posed, axis, point)
+        if values[np.argmax(np.abs(values))] < 0:
+            axis, values = -axis, -values
+        hyps.append((REVOLUTE, axis, point, values))
+    return hyps
+
+
+def score_level(frames) -> int:
+    """Pyramid level of hypothesis scoring: half resolution (the coarsest can be too small to
+    see a part's motion)."""
+    return min(1, len(frames.levels) - 1)
+
+
+@torch.no_grad()
+def score_at(model: ArticulatedSplat, frames, cfg, k: int, ti: int, values: np.ndarray) -> \
+        tuple[float, float]:
+    """Lowest image loss (half resolution) at time index ``ti`` over joint ``k``'s candidate ``values``
+    (rad / m), and the value reaching it."""
+    from .fit import frame_loss
+    level = score_level(frames)
+    ids = frames.at_time(ti)
+    unit = model.unit_of(model.types[k])
+    best = (np.inf, 0.0)
+    for v in values:
+        model.states[k, ti] = float(v) / unit
+        loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids) / len(ids)
+        best = min(best, (loss, float(v)))
+    return best
+
+
+def moving_frames(model: ArticulatedSplat, frames, k: int) -> list[int]:
+    """Frames where joint ``k`` is away from 0 by more than 10 % of its largest value."""
+    v = np.abs(model.states[k].detach().cpu().numpy() * model.moving.cpu().numpy())
+    if v.max() <= 0:
+        return []
+    return [i for i, ti in enumerate(frames.time_index) if v[ti] > 0.1 * v.max()]
+
+
+@torch.no_grad()
+def key_time(model: ArticulatedSplat, frames, cfg, k: int) -> int:
+    """The time index where joint ``k`` at rest (others as fitted) explains the frames worst:
+    where its part is furthest from closed, whatever the current hypothesis says."""
+    from .fit import frame_loss
+    level = score_level(frames)
+    snap = _snapshot(model)
+    model.states = model.states.clone()
+    model.states[k] = 0.0
+    per_time = np.zeros(len(frames.times))
+    for i, ti in enumerate(frames.time_index):
+        per_time[ti] += float(frame_loss(model, frames, level, i, cfg))
+    _restore(model, snap)
+    return int(np.argmax(per_time))
+
+
+def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[str, dict[str, Any]]:
+    """Keep, per joint, the type whose fit explains the frames where it moves better.
+
+    ``fixed`` joints (trusted user joints, locked joints) keep their type. Each alternative
+    (:func:`alternatives`) is scored by rendering at half resolution at the time the part
+    moves most (its value searched); the best one gets its states searched at every time, is
+    fitted coarse-to-fine with only this joint free, and is kept
+    if its image loss over the frames where the part moves is lower. Returns per joint the evidence:
+    both losses, the kept type and the relative margin.
+    """
+    model, frames, cfg = run.model, run.frames, run.cfg
+    evidence: dict[str, dict[str, Any]] = {}
+    todo = [k for k in range(model.k) if not fixed[k]]
+    steps = max(run.options.iterations // 2, 1)
+    for k in todo:
+        name = model.names[k]
+        ids = moving_frames(model, frames, k)
+        hyps = alternatives(model, k)
+        if not ids or not hyps:
+            run.done += share / len(todo)
+            continue
+        kept = _snapshot(model)
+        here = float(evaluate(model, frames, cfg, 0, ids).mean())
+        key = key_time(model, frames, cfg, k)
+        scored = []
+        for kind, axis, point, values in hyps[:tries]:
+            model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+            grid = state_candidates(model, k)
+            if values is not None:
+                grid = np.append(grid, values[key])
+            loss, value = score_at(model, frames, cfg, k, key, grid)
+            scored.append((loss, axis, point, values))
+            _restore(model, kept)
+            run.progress.check_cancel()
+        _, axis, point, values = min(scored, key=lambda s: s[0])
+        kind = hyps[0][0]
+        model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+        search_states(model, frames, k, cfg, state_candidates(model, k))
+        run.run_fit(steps, f"{name} as {kind}", share / len(todo),
+                    free=[i == k for i in range(model.k)], coarse=cfg.coarse)
+        there = float(evaluate(model, frames, cfg, 0, ids).mean())
+        losses = {kept[0][k]: here, kind: there}
+        if there >= here:
+            _restore(model, kept)
+        best = model.types[k]
+        margin = (max(here, there) - min(here, there)) / max(min(here, there), 1e-12)
+        evidence[name] = {f"loss_{t}": round(v, 6) for t, v in losses.items()}
+        evidence[name].update(type=best, margin=round(margin, 6))
+        run.progress.log(f"{name}: {best} (image loss {losses[REVOLUTE]:.4f} revolute, "
+                         f"{losses[PRISMATIC]:.4f} prismatic)")
+    return evidence
+
+
+def remove_spurious(run, locked: list[bool]) -> list[str]:
+    """Remove the joints whose part, left at rest (state 0 at every time, i.e. merged into the
+    base), explains the frames no worse than moving (within ``REMOVE_TOL``); returns their names."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    removed = []
+    k = 0
+    while k < model.k:
+        if locked[k]:
+            k += 1
+            continue
+        here = float(evaluate(model, frames, cfg).mean())
+        snap = _snapshot(model)
+        with torch.no_grad():
+            model.states = model.states.clone()
+            model.states[k] = 0.0
+        rest = float(evaluate(model, frames, cfg).mean())
+        _restore(model, snap)
+        if rest <= here * (1 + REMOVE_TOL):
+            run.progress.log(f"{model.names[k]}: removed (at rest the loss is {rest:.4f}, "
+                             f"moving {here:.4f})")
+            removed.append(model.names[k])
+            model.drop(k)
+            run.trust = torch.cat([run.trust[:k], run.trust[k + 1:]])
+            locked = locked[:k] + locked[k + 1:]
+        else:
+            k += 1
+    return removed
+
+
+def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
+                      start_types: list[str], names: list[str]) -> list[str]:
+    """Per joint whose type did not change: if the start's axis and point, with the fitted states
+    and parts, explain the frames where the joint moves better than the fitted ones, take them
+    back (a precise proposal is not traded for a fit that wandered along a flat valley).
+    Returns the names of the joints that kept their start."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    kept = []
+    for k in range(model.k):
+        s = names.index(model.names[k]) if model.names[k] in names else None
+        if s is None or model.types[k] != start_types[s] or bool(model.locked[k]):
+            continue
+        ids = moving_frames(model, frames, k)
+        if not ids:
+            continue
+        fitted = _snapshot(model)
+        here = float(evaluate(model, frames, cfg, 0, ids).mean())
+        with torch.no_grad():
+            model.axes = model.axes.clone()
+            model.origins = model.origins.clone()
+            a = torch.as_tensor(start_axes[s], dtype=torch.float32, device=model.axes.device)
+            if float((a * model.joint_axes()[k]).sum()) < 0:   # the fitted states' sign
+                a = -a
+            model.axes[k] = a
+            model.origins[k] = torch.as_tensor(start_origins[s], dtype=torch.float32)
+        there = float(evaluate(model, frames, cfg, 0, ids).mean())
+        if there < here:
+            kept.append(model.names[k])
+            run.progress.log(f"{model.names[k]}: the start explains the frames better "
+                             f"({there:.5f} < {here:.5f}); kept")
+        else:
+            _restore(model, fitted)
+    return kept

@@ -1,0 +1,209 @@
+"""The articulated splat: the canonical (closed) splat, K joints, states per time, skinning.
+
+Unknowns (torch tensors, optimised by :mod:`.fit`): per joint an axis (K,3) and a point on it
+(K,3), the state of every joint at every interaction time (K,T) and per Gaussian the skinning
+logits over base + K parts (N,K+1). Joint types are fixed per hypothesis (type selection compares
+hypotheses, :mod:`.hypotheses`). States are stored in units of ``unit`` (1 rad for revolute joints,
+half the object size for prismatic ones) so one learning rate suits both; the state at time 0 is
+pinned to 0 (the canonical splat is the closed object). Locked joints keep their axis and point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+
+from ...model.joints import Joint
+from ...render.rasterize import rasterize
+from .kinematics import PRISMATIC, REVOLUTE, joint_motions, skin
+
+HARD_LOGIT = 8.0    # logit of a hardened / box-assigned part (weight ~0.999 with 2 parts)
+
+
+@dataclass
+class Splat:
+    """The fixed canonical Gaussians as tensors."""
+
+    means: torch.Tensor
+    quats: torch.Tensor
+    log_scales: torch.Tensor
+    opacity_logits: torch.Tensor
+    sh: torch.Tensor
+
+    @property
+    def n(self) -> int:
+        return int(self.means.shape[0])
+
+    @classmethod
+    def from_arrays(cls, a, device: torch.device) -> "Splat":
+        def t(x):
+            return torch.as_tensor(np.asarray(x), dtype=torch.float32, device=device)
+        return cls(t(a.means), t(a.quats), t(a.log_scales), t(a.opacity_logits), t(a.sh))
+
+
+class ArticulatedSplat:
+    """Canonical splat + joints + states + skinning; ``render(view, ti)`` poses and renders."""
+
+    def __init__(self, splat: Splat, joints: list[Joint], times: list[int], labels: np.ndarray,
+                 size: float, locked: list[bool], knn: int = 8) -> None:
+        dev = splat.means.device
+        self.splat, self.size, self.times = splat, size, list(times)
+        self.names = [j.name for j in joints]
+        self.types = [j.type for j in joints]
+        self.locked = torch.tensor(locked, dtype=torch.bool, device=dev).reshape(-1)
+        K, T = len(joints), len(times)
+        f = dict(dtype=torch.float32, device=dev)
+        self.axes = torch.tensor(np.array([j.axis for j in joints]).reshape(K, 3), **f)
+        self.origins = torch.tensor(np.array([j.origin for j in joints]).reshape(K, 3), **f)
+        self.axes0, self.origins0 = self.axes.clone(), self.origins.clone()
+        self.states = torch.zeros(K, T, **f)
+        for k, j in enumerate(joints):
+            for ti, t in enumerate(times):
+                if j.states and t in j.states:
+                    self.states[k, ti] = j.states[t] / self.unit_of(j.type)
+        self.moving = torch.tensor([t != 0 for t in times], **f)
+        self.logits = torch.zeros(splat.n, K + 1, **f)
+        self.logits[torch.arange(splat.n), torch.as_tensor(labels, device=dev)] = HARD_LOGIT
+        self.hard: torch.Tensor | None = None
+        tree = cKDTree(splat.means.cpu().numpy())
+        k = min(knn + 1, splat.n)
+        self.neighbours = torch.as_tensor(tree.query(splat.means.cpu().numpy(), k)[1][:, 1:],
+                                          device=dev)
+
+    # --- parameters ----------------------------------------------------------------------------
+    @property
+    def k(self) -> int:
+        return len(self.types)
+
+    def unit_of(self, kind: str) -> float:
+        return 1.0 if kind == REVOLUTE else 0.5 * self.size
+
+    def units(self) -> torch.Tensor:
+        return torch.tensor([self.unit_of(t) for t in self.types], dtype=torch.float32,
+                            device=self.axes.device)
+
+    def params(self) -> dict[str, torch.Tensor]:
+        """The tensors an optimiser updates (hardened models leave the logits out)."""
+        p = {"axes": self.axes, "origins": self.origins, "states": self.states}
+        if self.hard is None:
+            p["logits"] = self.logits
+        return p
+
+    def load(self, params: dict[str, torch.Tensor]) -> None:
+        """Take the optimiser's tensors as the current values."""
+        for name, value in params.items():
+            setattr(self, name, value)
+
+    def joint_axes(self) -> torch.Tensor:
+        a = torch.where(self.locked[:, None], self.axes0, self.axes)
+        return a / a.norm(dim=-1, keepdim=True)
+
+    def joint_origins(self) -> torch.Tensor:
+        return torch.where(self.locked[:, None], self.origins0, self.origins)
+
+    def values(self, ti: int) -> torch.Tensor:
+        """Joint values (rad / m) at time index ``ti``."""
+        return self.states[:, ti] * self.moving[ti] * self.units()
+
+    def weights(self) -> torch.Tensor:
+        """Skinning weights (N, K+1)."""
+        if self.hard is not None:
+            return torch.nn.functional.one_hot(self.hard, self.k + 1).float()
+        return torch.softmax(self.logits, -1)
+
+    def labels(self) -> np.ndarray:
+        """Part label per Gaussian (0 = base, k+1 = joint k)."""
+        if self.hard is not None:
+            return self.hard.cpu().numpy()
+        return self.logits.argmax(-1).cpu().numpy()
+
+    def harden(self) -> None:
+        """Fix each Gaussian to its most likely part (the rigid parts of the final model)."""
+        self.hard = self.logits.detach().argmax(-1)
+
+    # --- posing and rendering ------------------------------------------------------------------
+    def posed(self, ti: int) -> tuple[torch.Tensor, torch.Tensor]:
+        s = self.splat
+        if self.k == 0:
+            return s.means, s.quats
+        R, t, q = joint_motions(self.types, self.joint_axes(), self.joint_origins(),
+                                self.values(ti))
+        return skin(s.means, s.quats, self.weights(), R, t, q)
+
+    def render(self, view, ti: int, backend: str = "auto"):
+        means, quats = self.posed(ti)
+        s = self.splat
+        return rasterize(means, quats, s.log_scales, s.opacity_logits, s.sh, view.K, view.w2c,
+                         view.width, view.height, None, backend)
+
+    # --- regularisers --------------------------------------------------------------------------
+    def skin_regularisers(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """kNN smoothness (mean L1 difference of neighbours' weights) and mean entropy."""
+        if self.hard is not None or self.k == 0:
+            z = torch.zeros((), device=self.axes.device)
+            return z, z
+        w = torch.softmax(self.logits, -1)
+        smooth = (w[:, None, :] - w[self.neighbours]).abs().sum(-1).mean()
+        entropy = -(w * torch.log(w.clamp_min(1e-8))).sum(-1).mean()
+        return smooth, entropy
+
+    def temporal(self) -> torch.Tensor:
+        """Mean squared change of the states between consecutive times (state units)."""
+        if self.states.shape[1] < 2 or self.k == 0:
+            return torch.zeros((), device=self.axes.device)
+        s = self.states * self.moving
+        return ((s[:, 1:] - s[:, :-1]) ** 2).mean()
+
+    def prior(self, strength: torch.Tensor) -> torch.Tensor:
+        """Pull towards the start (``strength`` (K,) per joint): 1 − |cos| of the axes plus the
+        squared distance of the start's point from the axis line, in object sizes."""
+        if self.k == 0:
+            return torch.zeros((), device=self.axes.device)
+        u = self.joint_axes()
+        cos = (u * self.axes0 / self.axes0.norm(dim=-1, keepdim=True)).sum(-1).abs()
+        d = self.origins0 - self.joint_origins()
+        d = d - (d * u).sum(-1, keepdim=True) * u
+        rev = torch.tensor([t == REVOLUTE for t in self.types], device=u.device)
+        dist = torch.where(rev, (d ** 2).sum(-1) / self.size ** 2, torch.zeros_like(cos))
+        return (strength * (1 - cos + dist)).sum()
+
+    # --- export --------------------------------------------------------------------------------
+    def joint_values(self, k: int) -> dict[int, float]:
+        """State of joint ``k`` per time (rad / m)."""
+        unit = self.unit_of(self.types[k])
+        return {t: float(self.states[k, ti] * self.moving[ti]) * unit
+                for ti, t in enumerate(self.times)}
+
+    def set_type(self, k: int, kind: str, axis: np.ndarray, origin: np.ndarray,
+                 values: dict[int, float] | np.ndarray) -> None:
+        """Replace joint ``k``'s hypothesis (type, axis, point, states in rad / m)."""
+        assert kind in (REVOLUTE, PRISMATIC)
+        with torch.no_grad():
+            self.types[k] = kind
+            self.axes = self.axes.detach().clone()
+            self.origins = self.origins.detach().clone()
+            self.states = self.states.detach().clone()
+            self.axes[k] = torch.as_tensor(np.asarray(axis, float), dtype=torch.float32)
+            self.origins[k] = torch.as_tensor(np.asarray(origin, float), dtype=torch.float32)
+            v = np.asarray([values[t] for t in self.times] if isinstance(values, dict)
+                           else values, float)
+            self.states[k] = torch.as_tensor(v / self.unit_of(kind), dtype=torch.float32)
+
+    def drop(self, k: int) -> None:
+        """Remove joint ``k``; its Gaussians join the base."""
+        keep = [i for i in range(self.k) if i != k]
+        cols = [0] + [i + 1 for i in keep]
+        with torch.no_grad():
+            for name in ("axes", "origins", "axes0", "origins0", "states"):
+                setattr(self, name, getattr(self, name).detach()[keep].clone())
+            self.locked = self.locked[keep]
+            self.logits = self.logits.detach()[:, cols].clone()
+            if self.hard is not None:
+                h = self.hard.clone()
+                h[self.hard == k + 1] = 0
+                h[self.hard > k + 1] -= 1
+                self.hard = h
+        del self.names[k], self.types[k]

@@ -1,0 +1,255 @@
+"""``artgs optimise OUT``: joints, states and part assignment fitted to the interaction frames.
+
+Reads OUT/splat.ply, OUT/proposals.json (any source, user-edited or not) and the capture's
+interaction frames; writes OUT/part_labels.npy (the part of every Gaussian of splat.ply: 0 = base,
+k = the k-th joint of articulation.json) and OUT/articulation.json (``"optimised": true``; per joint
+``states`` per time, ``limit`` = the observed range, ``residual``, ``confidence`` and the evidence
+behind them). Nothing is written before the end: a cancel or a failure leaves OUT as it was.
+
+Steps (each fit is :func:`.fit.fit`):
+1. start from the proposals: part of each Gaussian from the joints' ``extent`` boxes; states
+   from the proposal or, where it has none, a search per time;
+2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
+3. type by evidence, then spurious parts (:mod:`.hypotheses`);
+4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
+   a joint whose start explains its frames better than the fit keeps the start's axis and point;
+5. report per joint residual, observed range and confidence.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ...geometry.parts import assign_parts
+from ...model import atomic, layout, registry
+from ...model.capture import TRANSFORMS, Capture
+from ...model.errors import InputError
+from ...model.joints import Articulation, Joint, read_articulation, write_articulation
+from ...model.ply import read_ply
+from ...model.progress import Progress
+from ...model.registry import OptimiseOptions
+from ...render.device import resolve_device
+from .fit import FitConfig, evaluate, fit, search_states
+from .frames import FrameSet, interaction_frames
+from .model import ArticulatedSplat, Splat
+from .kinematics import REVOLUTE
+
+STAGE = "optimise"
+USER_TRUST = 1.0     # prior strength of ``source: user`` joints (others 0)
+
+
+def object_size(means: np.ndarray) -> float:
+    """Diagonal of the splat's 1–99 % percentile box (metres)."""
+    lo, hi = np.percentile(means, 1, axis=0), np.percentile(means, 99, axis=0)
+    return float(max(np.linalg.norm(hi - lo), 1e-3))
+
+
+def is_locked(j: Joint) -> bool:
+    """A joint the user locked (``"locked": true``): its type, axis and point stay fixed."""
+    return bool(j.extra.get("locked", False))
+
+
+def check(capture: Capture, options: OptimiseOptions) -> None:
+    """Refuse a capture or options the optimisation cannot serve, before any work."""
+    if options.iterations < 1:
+        raise InputError("--iterations", f"must be positive, not {options.iterations}")
+    frames = [f for f in capture.interaction if f.time is not None]
+    if not frames:
+        raise InputError(Path(capture.root) / TRANSFORMS, "optimisation needs interaction frames "
+                         "(\"phase\": \"interaction\" with an integer \"time\")", field="frames")
+    missing = [f for f in frames if f.depth is None]
+    if missing:
+        raise InputError(Path(capture.root) / TRANSFORMS, "optimisation needs depth on every "
+                         "interaction frame", frame=missing[0].index, field="depth_file_path")
+
+
+class Runner:
+    """Shared state of one optimisation: frames, model, config, progress."""
+
+    def __init__(self, model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig,
+                 progress: Progress, options: OptimiseOptions, trust: torch.Tensor) -> None:
+        self.model, self.frames, self.cfg = model, frames, cfg
+        self.progress, self.options, self.trust = progress, options, trust
+        self.rng = np.random.default_rng(options.seed)
+        self.phase = ""
+        self.done = 0.0
+        self.share = 0.0
+
+    def run_fit(self, steps: int, phase: str, share: float, **kw: Any) -> float:
+        """A fit that reports progress for ``share`` of the stage."""
+        self.phase = phase
+
+        def tick(step: int, loss: float) -> None:
+            if step % 10 == 0 or step == steps - 1:
+                self.progress.update(STAGE, self.done + share * (step + 1) / steps,
+                                     f"{phase}: step {step + 1}/{steps}", loss=loss,
+                                     **self.joint_figures())
+            else:
+                self.progress.check_cancel()
+
+        loss = fit(self.model, self.frames, self.cfg, steps, self.rng, prior=self.trust,
+                   tick=tick, **kw)
+        self.done += share
+        return loss
+
+    def joint_figures(self) -> dict[str, Any]:
+        """Current joints (streamed to the add-on so bones can move live)."""
+        m = self.model
+        axes, origins = m.joint_axes().detach().cpu().numpy(), m.joint_origins().detach().cpu().numpy()
+        return {"joints": [{"name": n, "type": t, "axis": [round(float(x), 5) for x in a],
+                            "origin": [round(float(x), 5) for x in o]}
+                           for n, t, a, o in zip(m.names, m.types, axes, origins)]}
+
+
+def optimise(out: str | Path, capture: Capture, progress: Progress,
+             options: OptimiseOptions | None = None,
+             config: FitConfig | None = None) -> dict[str, Any]:
+    """Optimise the proposals of ``out`` against ``capture``; writes the outputs (module doc)."""
+    from . import hypotheses
+
+    options = options or OptimiseOptions()
+    cfg = config or FitConfig()
+    out = Path(out)
+    check(capture, options)
+    arrays = read_ply(registry.require(out, layout.SPLAT))
+    proposals = read_articulation(registry.require(out, layout.PROPOSALS))
+    t0 = time.perf_counter()
+    dev = resolve_device(options.device)
+    torch.manual_seed(options.seed)
+    frames = interaction_frames(capture, dev)
+    splat = Splat.from_arrays(arrays, dev)
+    size = object_size(arrays.means)
+    joints = list(proposals.joints)
+    labels = assign_parts(arrays.means, joints)
+    model = ArticulatedSplat(splat, joints, frames.times, labels, size,
+                             [is_locked(j) for j in joints])
+    trust = torch.tensor([USER_TRUST if j.source == "user" else 0.0 for j in joints],
+                         dtype=torch.float32, device=dev)
+    run = Runner(model, frames, cfg, progress, options, trust)
+    n = options.iterations
+    progress.log(f"optimise: {len(joints)} joint(s), {splat.n} Gaussians, "
+                 f"{len(frames.time_index)} frames at {len(frames.times)} times, "
+                 f"size {size:.3f} m")
+
+    model.hard = torch.as_tensor(labels, device=dev)       # the boxes' parts, until step 4
+    start = (model.axes.cpu().numpy().copy(), model.origins.cpu().numpy().copy(),
+             list(model.types), list(model.names))
+    for k, j in enumerate(joints):
+        if not j.states:
+            search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
+    run.run_fit(n, "joints", 0.25, coarse=cfg.coarse)
+    evidence: dict[str, dict[str, Any]] = {}
+    if options.types and model.k:
+        evidence = hypotheses.select_types(run, share=0.35,
+                                           fixed=[j.source == "user" or is_locked(j)
+                                                  for j in joints])
+    removed: list[str] = []
+    if options.parts and model.k:
+        removed = hypotheses.remove_spurious(run, locked=model.locked.tolist())
+    run.done = 0.6
+    model.hard = None                                       # soft skinning from the box parts
+    run.run_fit(max(n // 2, 1), "joints and skinning", 0.25, lr_scale=0.3)
+    model.harden()
+    run.run_fit(max(n // 4, 1), "hardened", 0.15, lr_scale=0.1)
+    kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
+    losses = evaluate(model, frames, cfg)
+    result = export(model, frames, joints, losses, evidence, cfg)
+    meta = {k: v for k, v in proposals.meta.items() if k != "optimised"}
+    articulation = Articulation(result, {**meta, "optimised": True,
+                                         "loss": float(losses.mean()), "removed": removed})
+    figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
+               "kept_start": kept_start,
+               "types": [j.type for j in result],
+               "seconds": round(time.perf_counter() - t0, 2)}
+    write_labels(out / layout.PART_LABELS, model.labels())
+    write_articulation(out / layout.ARTICULATION, articulation)
+    return figures
+
+
+def write_labels(path: Path, labels: np.ndarray) -> None:
+    """The part label of every Gaussian of splat.ply as an int32 .npy, atomically."""
+    buf = io.BytesIO()
+    np.save(buf, labels.astype(np.int32))
+    atomic.write_bytes(path, buf.getvalue())
+
+
+def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losses: np.ndarray,
+           evidence: dict[str, dict[str, Any]], cfg: FitConfig) -> list[Joint]:
+    """The fitted joints with states, observed range as limit, residual and confidence."""
+    labels = model.labels()
+    means = model.splat.means.cpu().numpy()
+    axes = model.joint_axes().detach().cpu().numpy()
+    origins = model.joint_origins().detach().cpu().numpy()
+    result = []
+    by_name = {j.name: j for j in joints}
+    for k, name in enumerate(model.names):
+        src = by_name.get(name)
+        kind = model.types[k]
+        pts = means[labels == k + 1]
+        centre = pts.mean(0) if len(pts) else origins[k]
+        axis = axes[k]
+        if kind == REVOLUTE:  # the point on the axis line nearest the part
+            origin = origins[k] + ((centre - origins[k]) @ axis) * axis
+        else:
+            origin = centre
+        states = model.joint_values(k)
+        values = np.array(list(states.values()))
+        if values[np.argmax(np.abs(values))] < 0:   # opening is positive: flip the axis
+            axis, values = -axis, -values
+            states = {t: -v for t, v in states.items()}
+        lo, hi = float(min(0.0, values.min())), float(max(0.0, values.max()))
+        moving = [i for i, ti in enumerate(frames.time_index)
+                  if abs(states[frames.times[ti]]) > 0.1 * max(hi - lo, 1e-9)]
+        residual = float(losses[moving].mean()) if moving else float(losses.mean())
+        ev = evidence.get(name, {})
+        warnings = []
+        span = (hi - lo) * (1.0 if kind == REVOLUTE else 1.0 / (0.05 * model.size))
+        if span < math.radians(10):
+            warnings.append("little motion seen")
+        if len(pts) < 50:
+            warnings.append("part has few Gaussians")
+        margin = ev.get("margin")
+        confidence = 1.0 / (1.0 + residual)
+        if margin is not None:
+            confidence *= min(1.0, 0.5 + 5.0 * max(margin, 0.0))
+        if warnings:
+            confidence *= 0.5
+        extra = dict(src.extra) if src is not None else {}
+        extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
+                     evidence=ev, warnings=warnings)
+        result.append(Joint(
+            name=name, type=kind, axis=axis, origin=origin, limit=(lo, hi),
+            parent=src.parent if src else "base", child=src.child if src else f"{name}_link",
+            states=states, source=src.source if src else "optimise",
+            confidence=round(float(confidence), 4), bbox=src.bbox if src else None,
+            handle=src.handle if src else None, extent=part_box(pts) if len(pts) else
+            (src.extent if src else None), extra=extra))
+    return result
+
+
+def part_box(points: np.ndarray) -> dict[str, Any]:
+    """Oriented box (PCA axes) of a part's points, 1–99 % percentiles."""
+    c = points.mean(0)
+    _, _, vt = np.linalg.svd(points - c, full_matrices=False) if len(points) > 2 else \
+        (None, None, np.eye(3))
+    local = (points - c) @ vt.T
+    lo, hi = np.percentile(local, 1, axis=0), np.percentile(local, 99, axis=0)
+    centre = c + ((lo + hi) / 2) @ vt
+    return {"center": [float(v) for v in centre], "axes": [[float(v) for v in r] for r in vt],
+            "half_size": [float(v) for v in (hi - lo) / 2]}
+
+
+def run(out: Path, capture: Capture | None, options: OptimiseOptions,
+        progress: Progress) -> dict[str, Any]:
+    """The optimise stage (registry entry): OUT/articulation.json, OUT/part_labels.npy."""
+    if capture is None:
+        raise InputError(Path(out) / layout.REPORT, "optimisation needs the capture",
+                         field="capture")
+    return optimise(out, capture, progress, options)

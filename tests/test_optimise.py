@@ -1,0 +1,220 @@
+"""The articulation optimisation (``artgs optimise``) on tiny generated captures."""
+
+from __future__ import annotations
+
+import copy
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from artgs.core.geometry.metrics import match_joints
+from artgs.core.model import layout
+from artgs.core.model.capture import load_capture
+from artgs.core.model.errors import Cancelled
+from artgs.core.model.joints import (Articulation, joint_transform, read_articulation,
+                                     rotation_about_axis, write_articulation)
+from artgs.core.model.ply import write_ply
+from artgs.core.model.progress import QUIET, Progress
+from artgs.core.stages.optimise import OptimiseOptions, optimise
+from artgs.core.stages.optimise.kinematics import joint_motions, skin
+from artgs.core.stages.reconstruct import initial_splats
+from artgs.core.synth.generate import generate_object
+
+SIZE = {"width": 64, "height": 48, "static_views": 8, "steps": 3}
+
+
+def _perturb(joint, degrees: float, metres: float, seed: int):
+    """A copy of ``joint`` with its axis turned by ``degrees`` and its line moved by ``metres``."""
+    rng = np.random.default_rng(seed)
+    j = copy.deepcopy(joint)
+    p = np.cross(j.axis, rng.normal(size=3))
+    j.axis = rotation_about_axis(p / np.linalg.norm(p), np.radians(degrees)) @ j.axis
+    d = rng.normal(size=3)
+    d -= (d @ j.axis) * j.axis
+    j.origin = j.origin + metres * d / np.linalg.norm(d)
+    return j
+
+
+@pytest.fixture(scope="module")
+def cabinet(tmp_path_factory) -> Path:
+    """A door + drawer cabinet capture and its depth-initialised splat."""
+    root = tmp_path_factory.mktemp("optimise")
+    cap = generate_object(root / "cabinet", "cabinet", 1, **SIZE)
+    return cap
+
+
+def _out(tmp_path: Path, cap: Path, joints) -> Path:
+    out = tmp_path / "out"
+    out.mkdir()
+    write_ply(out / layout.SPLAT, initial_splats(load_capture(cap).static)[0])
+    write_articulation(out / layout.PROPOSALS, Articulation(joints, {"source": "test"}))
+    layout.update_report(out, capture=str(cap))
+    return out
+
+
+# --- kinematics ----------------------------------------------------------------------------------
+
+def test_joint_motions_match_the_schema():
+    rng = np.random.default_rng(0)
+    types = ["revolute", "prismatic", "revolute"]
+    axes = rng.normal(size=(3, 3))
+    origins = rng.normal(size=(3, 3))
+    values = np.array([0.7, 0.3, -2.0])
+    R, t, q = joint_motions(types, torch.tensor(axes), torch.tensor(origins), torch.tensor(values))
+    for k in range(3):
+        T = joint_transform(types[k], axes[k], origins[k], values[k])
+        np.testing.assert_allclose(R[k].numpy(), T[:3, :3], atol=1e-12)
+        np.testing.assert_allclose(t[k].numpy(), T[:3, 3], atol=1e-12)
+    # the quaternion is the rotation's: rotate a vector both ways
+    w, v = q[0, 0], q[0, 1:]
+    x = torch.tensor([0.3, -0.2, 0.9], dtype=torch.float64)
+    rotated = x + 2 * w * torch.cross(v, x, dim=0) + 2 * torch.cross(v, torch.cross(v, x, dim=0), dim=0)
+    np.testing.assert_allclose(rotated.numpy(), (R[0] @ x).numpy(), atol=1e-12)
+
+
+def test_skinning_gradients_match_finite_differences():
+    rng = np.random.default_rng(1)
+    types = ["revolute", "prismatic"]
+    d = dict(dtype=torch.float64)
+    axes = torch.tensor(rng.normal(size=(2, 3)), **d, requires_grad=True)
+    origins = torch.tensor(rng.normal(size=(2, 3)), **d, requires_grad=True)
+    values = torch.tensor([0.6, 0.25], **d, requires_grad=True)
+    logits = torch.tensor(rng.normal(size=(5, 3)), **d, requires_grad=True)
+    means = torch.tensor(rng.normal(size=(5, 3)), **d)
+    quats = torch.tensor(rng.normal(size=(5, 4)), **d)
+
+    def f(axes, origins, values, logits):
+        R, t, q = joint_motions(types, axes, origins, values)
+        m, r = skin(means, quats, torch.softmax(logits, -1), R, t, q)
+        return (m ** 2).sum() + (m[:, 0] * r[:, 1]).sum() + r.sum()
+
+    assert torch.autograd.gradcheck(f, (axes, origins, values, logits), eps=1e-6, atol=1e-6)
+
+
+def test_hard_skinning_is_the_rigid_motion():
+    rng = np.random.default_rng(2)
+    means = torch.tensor(rng.normal(size=(4, 3)))
+    quats = torch.tensor([[1.0, 0, 0, 0]] * 4, dtype=torch.float64)
+    f64 = torch.float64
+    R, t, q = joint_motions(["revolute"], torch.tensor([[0.0, 0, 1]], dtype=f64),
+                            torch.tensor([[1.0, 0, 0]], dtype=f64),
+                            torch.tensor([np.pi / 2], dtype=f64))
+    w = torch.tensor([[1.0, 0], [0, 1], [0, 1], [1, 0]], dtype=torch.float64)
+    m, r = skin(means, quats, w, R, t, q)
+    T = joint_transform("revolute", [0, 0, 1], [1, 0, 0], np.pi / 2)
+    moved = means.numpy() @ T[:3, :3].T + T[:3, 3]
+    np.testing.assert_allclose(m.numpy()[[1, 2]], moved[[1, 2]], atol=1e-12)
+    np.testing.assert_allclose(m.numpy()[[0, 3]], means.numpy()[[0, 3]], atol=1e-12)
+    np.testing.assert_allclose(r.numpy()[1], [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)],
+                               atol=1e-12)
+
+
+# --- the stage -----------------------------------------------------------------------------------
+
+def test_recovers_perturbed_joints(cabinet, tmp_path):
+    gt = read_articulation(cabinet / "gt.json")
+    start = [_perturb(j, 20.0, 0.08, seed=k) for k, j in enumerate(gt.joints)]
+    out = _out(tmp_path, cabinet, start)
+    figures = optimise(out, load_capture(cabinet), QUIET,
+                       OptimiseOptions(iterations=150, types=False, parts=False))
+    art = read_articulation(out / layout.ARTICULATION)
+    assert art.meta["optimised"] is True and figures["joints"] == 2
+    for s in match_joints(art.joints, gt.joints):
+        assert s.type_correct and s.axis_error_deg < 3.0, s
+        if s.origin_error_cm is not None:
+            assert s.origin_error_cm < 2.0, s
+    labels = np.load(out / layout.PART_LABELS)
+    assert labels.shape == (len(initial_splats(load_capture(cabinet).static)[0]),)
+    assert set(np.unique(labels)) <= {0, 1, 2} and (labels == 1).sum() > 20
+    for j, true in zip(art.joints, gt.joints):
+        assert set(j.states) == set(true.states)
+        tol = 0.1 if j.type == "revolute" else 0.03   # rad / m, at 64x48
+        err = max(abs(j.states[t] - true.states[t]) for t in true.states)
+        assert err < tol, (j.name, err)
+        assert j.limit[0] <= 0 and abs(j.limit[1] - true.limit[1]) < tol
+        assert 0 <= j.confidence <= 1 and j.extra["residual"] >= 0
+
+
+def test_locked_joint_stays_put(cabinet, tmp_path):
+    gt = read_articulation(cabinet / "gt.json")
+    start = [_perturb(j, 10.0, 0.05, seed=7) for j in gt.joints]
+    start[0].source = "user"
+    start[0].extra["locked"] = True
+    out = _out(tmp_path, cabinet, start)
+    optimise(out, load_capture(cabinet), QUIET,
+             OptimiseOptions(iterations=20, types=True, parts=True))
+    art = read_articulation(out / layout.ARTICULATION)
+    door = next(j for j in art.joints if j.name == start[0].name)
+    assert door.type == start[0].type
+    np.testing.assert_allclose(door.axis, start[0].axis, atol=1e-6)
+    # the point may slide along the (fixed) axis line, not off it
+    d = door.origin - start[0].origin
+    assert np.linalg.norm(d - (d @ door.axis) * door.axis) < 1e-5
+
+
+def test_cancel_leaves_out_as_before(cabinet, tmp_path):
+    gt = read_articulation(cabinet / "gt.json")
+    out = _out(tmp_path, cabinet, gt.joints)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    calls = []
+    progress = Progress("quiet", cancel=lambda: len(calls.append(1) or calls) > 15)
+    with pytest.raises(Cancelled):
+        optimise(out, load_capture(cabinet), progress, OptimiseOptions(iterations=50))
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_cli_refuses_missing_proposals(cabinet, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    write_ply(out / layout.SPLAT, initial_splats(load_capture(cabinet).static)[0])
+    r = subprocess.run([sys.executable, "-m", "artgs", "optimise", str(out), "--capture",
+                        str(cabinet)], capture_output=True, text=True)
+    assert r.returncode == 2 and "proposals.json" in r.stderr and "artgs propose" in r.stderr
+    assert not (out / layout.ARTICULATION).exists()
+
+
+def test_type_chosen_by_evidence(cabinet, tmp_path):
+    """The door starts as a slide along its hinge line; type selection makes it a hinge again
+    (and keeps the drawer a slide)."""
+    gt = read_articulation(cabinet / "gt.json")
+    start = [copy.deepcopy(j) for j in gt.joints]
+    door = next(j for j in start if j.type == "revolute")
+    door.type = "prismatic"
+    door.states = {t: 0.3 * np.sin(v) for t, v in door.states.items()}
+    out = _out(tmp_path, cabinet, start)
+    figures = optimise(out, load_capture(cabinet), QUIET,
+                       OptimiseOptions(iterations=120, types=True, parts=False))
+    art = read_articulation(out / layout.ARTICULATION)
+    scores = match_joints(art.joints, gt.joints)
+    assert all(s.type_correct for s in scores), (scores, figures)
+    for s in scores:
+        assert s.axis_error_deg < 5.0, s
+    for j in art.joints:
+        ev = j.extra["evidence"]
+        assert ev["type"] == j.type and ev[f"loss_{j.type}"] == min(
+            ev["loss_revolute"], ev["loss_prismatic"])
+
+
+def test_spurious_part_removed(cabinet, tmp_path):
+    """A proposal on a piece of the body that never moves is dropped; the real ones stay."""
+    gt = read_articulation(cabinet / "gt.json")
+    means = initial_splats(load_capture(cabinet).static)[0].means
+    centres = np.array([j.extent["center"] for j in gt.joints])
+    far = means[np.argmax(np.linalg.norm(means[:, None] - centres[None], axis=-1).min(1))]
+    fake = copy.deepcopy(gt.joints[0])
+    fake.name, fake.child = "ghost", "ghost_link"
+    fake.extent = {"center": list(map(float, far)), "axes": np.eye(3).tolist(),
+                   "half_size": [0.12, 0.12, 0.12]}
+    fake.states = {t: 0.5 * v for t, v in fake.states.items()}
+    out = _out(tmp_path, cabinet, list(gt.joints) + [fake])
+    figures = optimise(out, load_capture(cabinet), QUIET,
+                       OptimiseOptions(iterations=60, types=False, parts=True))
+    names = [j.name for j in read_articulation(out / layout.ARTICULATION).joints]
+    assert "ghost" in figures["removed"] and "ghost" not in names, figures
+    assert set(names) == {j.name for j in gt.joints}
+    labels = np.load(out / layout.PART_LABELS)
+    assert labels.max() == 2
