@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from .common import ArtgsPanel, draw_state
+from .common import ArtgsPanel, draw_figures, draw_state
 
 
 def _draw_unavailable(layout: bpy.types.UILayout, action: str, icon: str, state) -> None:
@@ -21,8 +21,10 @@ class ARTGS_PT_optimise(ArtgsPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context: bpy.types.Context) -> None:
-        _draw_unavailable(self.layout.column(), "Optimise Joints (differentiable rendering)",
+        col = self.layout.column()
+        _draw_unavailable(col, "Optimise Joints (differentiable rendering)",
                           "MOD_HUE_SATURATION", context.scene.artgs.optimise)
+        draw_figures(col, context, "optimise")
 
 
 class ARTGS_PT_export(ArtgsPanel, bpy.types.Panel):
@@ -44,6 +46,7 @@ class ARTGS_PT_export(ArtgsPanel, bpy.types.Panel):
         row = col.row(align=True)
         row.operator("artgs.import_urdf", icon="IMPORT")
         row.operator("artgs.write_edited_urdf", icon="FILE_TICK")
+        draw_figures(col, context, "check")
 
 
 CLASSES = (ARTGS_PT_optimise, ARTGS_PT_export)
