@@ -18,7 +18,7 @@ from typing import Any, Callable
 from .model import layout, registry
 from .model.capture import Capture, load_capture, resolution_note
 from .model.outdir import claim_out
-from .model.joints import Articulation, read_articulation, write_articulation
+from .model.joints import Articulation, read_articulation
 from .model.progress import Progress
 from .model.registry import StageSpec
 from .resume import resume_since, stage_finished
@@ -119,10 +119,6 @@ def _run(capture_dir: Path, out: Path, progress: Progress, options: dict[str, An
             continue
         run_stage(spec, out, options[spec.name], progress, capture=capture)
 
-    if registry.producer_of(layout.ARTICULATION) is None:
-        proposals = read_articulation(out / layout.PROPOSALS)
-        write_articulation(out / layout.ARTICULATION,
-                           Articulation(proposals.joints, {**proposals.meta, "optimised": False}))
     articulation = read_articulation(out / layout.ARTICULATION)
     layout.update_report(out, "run", seconds=round(time.perf_counter() - start, 2),
                          joints=len(articulation.joints))

@@ -1,10 +1,10 @@
-"""Optimise and Export sections: shown, but their engine stages do not exist in this version."""
+"""Optimise section (its engine stage does not exist in this version) and the Export section."""
 
 from __future__ import annotations
 
 import bpy
 
-from .common import ArtgsPanel, draw_state
+from .common import ArtgsPanel, draw_figures, draw_state
 
 
 def _draw_unavailable(layout: bpy.types.UILayout, action: str, icon: str, state) -> None:
@@ -21,8 +21,10 @@ class ARTGS_PT_optimise(ArtgsPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context: bpy.types.Context) -> None:
-        _draw_unavailable(self.layout.column(), "Optimise Joints (differentiable rendering)",
+        col = self.layout.column()
+        _draw_unavailable(col, "Optimise Joints (differentiable rendering)",
                           "MOD_HUE_SATURATION", context.scene.artgs.optimise)
+        draw_figures(col, context, "optimise")
 
 
 class ARTGS_PT_export(ArtgsPanel, bpy.types.Panel):
@@ -31,8 +33,20 @@ class ARTGS_PT_export(ArtgsPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context: bpy.types.Context) -> None:
-        _draw_unavailable(self.layout.column(), "Export URDF (checked in PyBullet)", "EXPORT",
-                          context.scene.artgs.export)
+        col = self.layout.column()
+        col.operator("artgs.export_urdf", icon="EXPORT")
+        row = col.row(align=True)
+        row.operator("artgs.check_manipulation", icon="CON_ARMATURE")
+        row.operator("artgs.show_check_frames", text="", icon="IMAGE_DATA")
+        draw_state(col, context.scene.artgs.export)
+        image = bpy.data.images.get("ArtGS Check Frames")
+        if image is not None and image.preview is not None:
+            col.template_icon(icon_value=image.preview.icon_id, scale=6.0)
+        col.separator()
+        row = col.row(align=True)
+        row.operator("artgs.import_urdf", icon="IMPORT")
+        row.operator("artgs.write_edited_urdf", icon="FILE_TICK")
+        draw_figures(col, context, "check")
 
 
 CLASSES = (ARTGS_PT_optimise, ARTGS_PT_export)

@@ -91,7 +91,8 @@ def scene(addon):
     bpy.ops.wm.read_homefile(use_empty=True)
     prefs = preferences.get()
     prefs.engine_python, prefs.preview_cap, prefs.vlm_api_key = "", 200_000, ""
-    return bpy.context.scene
+    yield bpy.context.scene
+    prefs.engine_python = ""  # the choice is kept in engine.json: later tests get the default
 
 
 @pytest.fixture(scope="module")
@@ -319,7 +320,7 @@ def test_failing_capture_import_leaves_scene(scene, tmp_path, capture):
     assert "field 'fl_x'" in message and message in str(err.value)
     assert "Traceback" not in str(err.value)
     assert scene.artgs.capture.status == "FAILED" and _scene_state() == before
-    assert _preview_dirs() == temporary  # the temporary preview folder is gone
+    assert _preview_dirs() <= temporary  # ours is gone (others may come and go meanwhile)
 
 
 def _run(op, **kwargs) -> None:
@@ -414,6 +415,38 @@ def test_check_engine_reports_what_it_found(scene, tmp_path):
     assert str(engine) in preferences.last_check[-1]
 
 
+def test_stage_panels_show_the_last_runs_key_figures(tmp_path):
+    from artgs.artgs_addon.last_run import key_figures
+    from artgs.core.model import layout
+    from artgs.core.model.joints import Articulation, Joint, write_articulation
+
+    assert key_figures(tmp_path, "reconstruct") == [] and key_figures(None, "propose") == []
+    layout.update_report(tmp_path, "reconstruct", gaussians=14843, holdout_psnr=27.254, seconds=165.2)
+    layout.update_report(tmp_path, "propose", joints=2, seconds=3.0)
+    write_articulation(tmp_path / "proposals.json", Articulation([
+        Joint("door", "revolute", [0, 0, 1], [0.1, 0, 0], (0, 1.5), confidence=0.83),
+        Joint("drawer", "prismatic", [0, -1, 0], [0, 0, 0.2], (0, 0.3))]))
+    splat = key_figures(tmp_path, "reconstruct")
+    assert splat[0].startswith("last run ") and splat[0].endswith("(165 s)")
+    assert splat[1:] == ["14,843 Gaussians", "held-out PSNR 27.25 dB"]
+    assert key_figures(tmp_path, "propose")[1:] == [
+        "2 joints", "door: revolute, confidence 0.83", "drawer: prismatic"]
+    # a new run replaces the figures (the file is read again when it changes)
+    import os
+    import time
+
+    layout.update_report(tmp_path, "reconstruct", gaussians=100, seconds=1.0)
+    later = time.time() + 5
+    os.utime(tmp_path / "report.json", (later, later))
+    assert key_figures(tmp_path, "reconstruct")[1:] == [
+        "100 Gaussians", "no held-out views (PSNR not measured)"]
+    layout.update_report(tmp_path, "optimise", axis_residual_deg=0.41)
+    layout.update_report(tmp_path, "check", success=True)
+    os.utime(tmp_path / "report.json", (later + 5, later + 5))
+    assert key_figures(tmp_path, "optimise")[1:] == ["axis residual deg 0.41"]
+    assert key_figures(tmp_path, "check")[1:] == ["success: True"]
+
+
 def test_bad_splat_is_reported_in_blender_as_on_the_command_line(scene, tmp_path, capture):
     """Issue 13: the engine's one-line refusal (file, element, field) reaches Blender's report
     area through the worker unchanged, and OUT keeps its earlier proposals."""
@@ -425,8 +458,11 @@ def test_bad_splat_is_reported_in_blender_as_on_the_command_line(scene, tmp_path
                         quats=np.tile(np.float32([1, 0, 0, 0]), (n, 1)),
                         log_scales=np.full((n, 3), -4, np.float32),
                         opacity_logits=np.zeros(n, np.float32), sh=np.zeros((n, 1, 3), np.float32))
-    splat.means[11, 2] = np.inf
     write_ply(out / "splat.ply", splat)
+    data = bytearray((out / "splat.ply").read_bytes())   # z of Gaussian 11 := inf
+    start = data.index(b"end_header\n") + len(b"end_header\n") + 4 * (11 * 17 + 2)
+    data[start:start + 4] = np.float32(np.inf).tobytes()
+    (out / "splat.ply").write_bytes(bytes(data))
     (out / "proposals.json").write_text('{"frame": "world", "joints": [], "source": "user"}\n')
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     scene.artgs.capture_dir, scene.artgs.output_dir = str(capture), str(out)

@@ -9,7 +9,8 @@ a module name and checked against these rules (README, "Repository layout"):
    render (model and geometry only); ``synth`` may import stages and what they may; ``bench``
    also synth (it generates its sets), pipeline and batch (it times them); only ``cli`` imports
    ``cli``, ``bench``, ``synth`` (and ``artgs.__main__`` imports cli). The ``artgs.core`` package
-   itself imports nothing. Every module of core/ belongs to one of these parts.
+   itself imports nothing. Every module of core/ belongs to one of these parts (a top-level
+   module of core/ is the part of its name, or the one :data:`MODULE_PARTS` gives it).
 2. ``core.model`` is numpy-only: at module level it imports only the standard library, numpy and
    model modules; inside functions only the few imports listed in :data:`MODEL_LAZY` (cv2 where
    the capture reader decodes images, model/frame_files.py; torch in the environment probe), so
@@ -23,6 +24,7 @@ a module name and checked against these rules (README, "Repository layout"):
    functions or under ``if TYPE_CHECKING``); importing ``a.b`` is an edge to ``a.b``, not to the
    package ``a`` that Python runs first.
 5. Imports of the package are relative (no ``import artgs...`` inside it).
+6. Only ``core.cli`` imports argparse: stages and tools take options dataclasses.
 """
 
 from __future__ import annotations
@@ -54,6 +56,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     "bench": _BELOW_STAGES | {"stages", "pipeline", "batch", "synth"},
     "cli": set(CORE_PARTS) - {"cli"},
 }
+#: top-level modules of core/ that belong to a part of another name
+MODULE_PARTS = {"artgs.core.resume": "pipeline"}   # what of a run is done: the runner's helper
 BLENDER_SIDE = ("artgs_addon", "operators", "panels")
 BLENDER_APIS = {"bpy", "bpy_extras", "mathutils", "gpu", "gpu_extras", "bmesh", "addon_utils",
                 "_bpy"}
@@ -145,6 +149,8 @@ def core_part(module: str) -> str | None:
     parts = module.split(".")
     if parts[:2] != [PACKAGE, "core"]:
         return None
+    if len(parts) == 3 and module in MODULE_PARTS:
+        return MODULE_PARTS[module]
     return parts[2] if len(parts) > 2 else ""
 
 
@@ -194,6 +200,8 @@ def rule_violations(imp: Import) -> list[str]:
             out.append(f"{imp}: the Blender side reaches {dst} only through the engine process")
         if not inside and _top(dst) not in STDLIB | BLENDER_APIS | {"numpy"}:
             out.append(f"{imp}: the Blender side may not import {_top(dst)}")
+    if _top(dst) == "argparse" and src_part != "cli":
+        out.append(f"{imp}: only core.cli parses command lines")
     if src_part is not None and ((not inside and _top(dst) in BLENDER_APIS)
                                  or (inside and is_blender_side(dst))):
         out.append(f"{imp}: core never imports Blender or the add-on")
@@ -307,6 +315,7 @@ def test_the_checker_reports_broken_rules(tmp_path):
     _inject(root, "core/geometry/cycle_a.py", "from . import cycle_b\n")
     _inject(root, "core/geometry/cycle_b.py", "from .cycle_a import x\n")
     _inject(root, "core/render/absolute.py", "from artgs.core.model import layout\n")
+    _inject(root, "core/stages/parsing.py", "def run(args):\n    import argparse\n")
     found = violations(root)
     expected = {
         "artgs.operators.injected:6 imports torch (lazily)": "Blender side may not import torch",
@@ -321,6 +330,7 @@ def test_the_checker_reports_broken_rules(tmp_path):
         "artgs.core.model.injected:7 imports cv2 (lazily)": "numpy-only",
         "import cycle": "artgs.core.geometry.cycle_a -> artgs.core.geometry.cycle_b",
         "artgs.core.render.absolute:1 imports artgs.core.model.layout": "must be relative",
+        "artgs.core.stages.parsing:2 imports argparse (lazily)": "only core.cli parses",
     }
     for where, what in expected.items():
         assert any(line.startswith(where) and what in line for line in found), (where, found)

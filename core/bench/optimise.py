@@ -1,6 +1,7 @@
 """``artgs bench-optimise``: joint accuracy per category without and with the optimisation.
 
-For each capture (generated with core.synth into a temporary folder, or taken from ``--data``):
+For each capture of the benchmark set (core.bench.sets: ``--set tight|realistic|partnet:DIR``,
+generated into a temporary folder, or ``--data DIR``):
 the static splat (depth-initialised, or reconstructed for ``--iterations``), the motion route's
 proposals (core.stages.propose), then the optimisation (core.stages.optimise); both scored against
 ``gt.json`` (core.geometry.metrics.match_joints). Prints per category: joints, type accuracy, AE
@@ -24,13 +25,13 @@ import numpy as np
 from ..geometry.metrics import match_joints
 from ..model import layout
 from ..model.capture import load_capture
-from ..model.errors import InputError
 from ..model.joints import Articulation, read_articulation, rotation_about_axis, write_articulation
 from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
 from ..model.registry import OptimiseOptions, ProposeOptions
 from .options import BenchOptimiseOptions
 from .propose import summarize
+from .sets import materialise, parse_set
 
 
 def _scores(pred, gt) -> list[dict]:
@@ -39,7 +40,8 @@ def _scores(pred, gt) -> list[dict]:
 
 
 def perturbed(joints, rng: np.random.Generator) -> list:
-    """Copies of ``joints`` with the axis turned by 10–30° and the line moved by 5–15 cm."""
+    """Copies of ``joints`` with the axis turned by 10–30° and the line moved by 5–15 cm (their
+    states, the true ones, are kept)."""
     out = []
     for j in joints:
         j = copy.deepcopy(j)
@@ -110,21 +112,16 @@ def basin_rate(results: list[dict], ae: float = 1.0, oe: float = 1.0) -> tuple[f
 
 
 def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
-    """``artgs bench-optimise [--data DIR] [--per-category N] [--seed S] [--category C ...]
-    [--width W --height H] [--iterations N] [--opt-iterations N] [--basin N]``."""
+    """``artgs bench-optimise [--set tight|realistic|partnet:DIR|data:DIR] [--per-category N]
+    [--seed S] [--category C ...] [--width W --height H] [--iterations N] [--opt-iterations N]
+    [--basin N]``."""
     options = OptimiseOptions(iterations=args.opt_iterations, device=args.device)
+    bset = parse_set(args.set, args.data)
     with tempfile.TemporaryDirectory(prefix="artgs-bench-optimise-") as tmp:
         tmp = Path(tmp)
-        if args.data:
-            data = Path(args.data)
-            captures = sorted(p.parent for p in data.glob("*/gt.json"))
-            if not captures:
-                raise InputError(data, "no capture folders with gt.json inside (make one with "
-                                 "`artgs synth`)")
-        else:
-            from ..synth.generate import generate_set
-            captures = generate_set(tmp / "data", args.category, args.per_category, args.seed,
-                                    progress, width=args.width, height=args.height)
+        captures = materialise(bset, tmp / "data", per_category=args.per_category,
+                               seed=args.seed, categories=args.category, progress=progress,
+                               marker="gt.json", width=args.width, height=args.height)
         progress.start("bench-optimise", f"{len(captures)} captures")
         results = []
         for k, cap in enumerate(captures):
@@ -142,8 +139,8 @@ def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
         progress.finished(before=json.dumps(before), after=json.dumps(after), basin_rate=rate,
                           basin_joints=n, results=json.dumps(results))
     else:
-        print(f"{len(captures)} captures, splat iterations {args.iterations}, optimisation "
-              f"iterations {args.opt_iterations}")
+        print(f"set {bset.label}, {len(captures)} captures, splat iterations {args.iterations}, "
+              f"optimisation iterations {args.opt_iterations}")
         print(format_table(before, after))
         if n:
             print(f"basin: {100 * rate:.0f} % of {n} joints from perturbed starts (10-30 deg, "

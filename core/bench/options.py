@@ -4,10 +4,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..model.categories import CATEGORIES
+from ..model.categories import CATEGORIES, EXTRA_KINDS
 from ..model.registry import DEVICES, option
 from ..model.robots import ROBOTS
 from ..render.constants import LOW_PASS
+
+
+#: Help of every benchmark's ``--set`` (core/bench/sets.py defines the sets).
+SET_HELP = ("benchmark set: tight | realistic | partnet:DIR (DIR/<kind>/<id>/mobility.urdf) | "
+            "data:DIR (default tight); see core/bench/sets.py")
 
 
 @dataclass
@@ -28,7 +33,8 @@ class BenchRenderOptions:
 class BenchReconstructOptions:
     """``artgs bench-reconstruct``: reconstruction quality and speed per category."""
 
-    data: str | None = option(None, "benchmark set from `artgs synth` (default: generate one)")
+    set: str | None = option(None, SET_HELP)
+    data: str | None = option(None, "capture folders already made (= --set data:DIR)")
     per_category: int = option(1, "objects per category (generated sets)")
     seed: int = option(0, "seed of the generated set")
     device: str = option("auto", "where torch work runs", choices=DEVICES)
@@ -38,13 +44,14 @@ class BenchReconstructOptions:
 class BenchProposeOptions:
     """``artgs bench-propose``: proposal accuracy per category (motion route)."""
 
-    data: str | None = option(None, "benchmark set from `artgs synth` (default: generate one)")
+    set: str | None = option(None, SET_HELP)
+    data: str | None = option(None, "capture folders already made (= --set data:DIR)")
     per_category: int = option(2, "objects per category (generated sets)")
     seed: int = option(0, "seed of the generated set")
     depth_noise: float = option(0.0, "generated sets: depth noise std-dev, metres")
     simultaneous: bool = option(False, "generated sets: the first two joints also move together")
     category: list[str] | None = option(None, "generated sets: only these categories",
-                                        choices=CATEGORIES)
+                                        choices=CATEGORIES + EXTRA_KINDS)
     width: int = option(160, "generated sets: image width")
     height: int = option(120, "generated sets: image height")
     iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
@@ -59,11 +66,12 @@ class BenchProposeOptions:
 class BenchOptimiseOptions:
     """``artgs bench-optimise``: joint accuracy without and with the optimisation; basin rate."""
 
-    data: str | None = option(None, "benchmark set from `artgs synth` (default: generate one)")
+    set: str | None = option(None, SET_HELP)
+    data: str | None = option(None, "capture folders already made (= --set data:DIR)")
     per_category: int = option(1, "objects per category (generated sets)")
     seed: int = option(0, "seed of the generated set")
     category: list[str] | None = option(None, "generated sets: only these categories",
-                                        choices=CATEGORIES)
+                                        choices=CATEGORIES + EXTRA_KINDS)
     width: int = option(160, "generated sets: image width")
     height: int = option(120, "generated sets: image height")
     iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
@@ -88,4 +96,21 @@ class BenchBatchOptions:
     workers: list[int] = field(default_factory=lambda: [1, 2],
                                metadata={"help": "worker counts to time"})
     ray: bool = option(False, "run the batches on a private local Ray instead of the process pool")
+    device: str = option("auto", "where torch work runs", choices=DEVICES)
+
+
+@dataclass
+class BenchCheckOptions:
+    """``artgs bench-check``: manipulation success per category (the paper's Table II)."""
+
+    data: str | None = option(None, "benchmark set from `artgs synth` (default: generate one)")
+    per_category: int = option(2, "objects per category (generated sets)")
+    seed: int = option(0, "seed of the generated set")
+    category: list[str] | None = option(None, "generated sets: only these categories",
+                                        choices=CATEGORIES)
+    width: int = option(160, "generated sets: image width")
+    height: int = option(120, "generated sets: image height")
+    iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
+                             "depth-initialised splat)")
+    robot: str = option("franka_panda", "robot from pybullet_data", choices=ROBOTS)
     device: str = option("auto", "where torch work runs", choices=DEVICES)

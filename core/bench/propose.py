@@ -1,6 +1,7 @@
 """``artgs bench-propose``: accuracy of the motion route per category on synthetic captures.
 
-For each capture (generated with core.synth into a temporary folder, or taken from ``--data``):
+For each capture of the benchmark set (core.bench.sets: ``--set tight|realistic|partnet:DIR``,
+generated into a temporary folder, or ``--data DIR``):
 initialise the static splat from the static views (core.reconstruct.initial_splats, or optimise
 it with core.reconstruct.reconstruct for ``--iterations``), run the motion route
 (core.propose.propose) and score it against ``gt.json`` (core.metrics.match_joints).
@@ -19,13 +20,13 @@ from pathlib import Path
 import numpy as np
 
 from ..model.capture import load_capture
-from ..model.errors import InputError
 from ..model.joints import read_articulation
 from ..geometry.metrics import match_joints
 from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
 from ..model.registry import ProposeOptions
 from .options import BenchProposeOptions
+from .sets import materialise, parse_set
 
 
 def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0,
@@ -76,41 +77,36 @@ def summarize(results: list[dict]) -> list[dict]:
 
 
 def format_table(rows: list[dict]) -> str:
-    head = (f"{'category':<13}{'caps':>5}{'joints':>7}{'type':>7}{'AE mean':>9}{'AE max':>8}"
+    w = max([13] + [len(r["category"]) + 1 for r in rows])
+    head = (f"{'category':<{w}}{'caps':>5}{'joints':>7}{'type':>7}{'AE mean':>9}{'AE max':>8}"
             f"{'OE mean':>9}{'OE max':>8}{'s/cap':>7}")
     lines = [head, "-" * len(head)]
     for r in rows:
         def f(v: float, w: int, p: int) -> str:
             return f"{'-':>{w}}" if math.isnan(v) else f"{v:>{w}.{p}f}"
-        lines.append(f"{r['category']:<13}{r['captures']:>5}{r['joints']:>7}"
+        lines.append(f"{r['category']:<{w}}{r['captures']:>5}{r['joints']:>7}"
                      f"{100 * r['type_acc']:>6.0f}%{f(r['ae_mean'], 9, 2)}{f(r['ae_max'], 8, 2)}"
                      f"{f(r['oe_mean'], 9, 2)}{f(r['oe_max'], 8, 2)}{r['seconds']:>7.1f}")
     return "\n".join(lines)
 
 
 def bench_propose(args: BenchProposeOptions, progress: Progress) -> int:
-    """``artgs bench-propose [--data DIR] [--per-category N] [--seed S] [--depth-noise s]
-    [--simultaneous] [--category C ...] [--width W --height H] [--iterations N]``."""
+    """``artgs bench-propose [--set tight|realistic|partnet:DIR|data:DIR] [--per-category N]
+    [--seed S] [--depth-noise s] [--simultaneous] [--category C ...] [--width W --height H]
+    [--iterations N]``."""
+    bset = parse_set(args.set, args.data)
     with tempfile.TemporaryDirectory(prefix="artgs-bench-propose-") as tmp:
         tmp = Path(tmp)
-        if args.data:
-            data = Path(args.data)
-            captures = sorted(p.parent for p in data.glob("*/gt.json"))
-            if not captures:
-                raise InputError(data, "no capture folders with gt.json inside (make one with "
-                                 "`artgs synth`)")
-        else:
-            from ..synth.generate import generate_set
-            captures = generate_set(tmp / "data", args.category, args.per_category, args.seed,
-                                    progress, width=args.width, height=args.height,
-                                    depth_noise=args.depth_noise,
-                                    simultaneous=args.simultaneous)
+        synth = dict(width=args.width, height=args.height, depth_noise=args.depth_noise,
+                     simultaneous=args.simultaneous)
+        captures = materialise(bset, tmp / "data", per_category=args.per_category,
+                               seed=args.seed, categories=args.category, progress=progress,
+                               marker="gt.json", **synth)
         variants = [("", captures, True)]
-        if args.robot and not args.data:
-            robot_set = generate_set(tmp / "robot", args.category, args.per_category, args.seed,
-                                     progress, width=args.width, height=args.height,
-                                     depth_noise=args.depth_noise,
-                                     simultaneous=args.simultaneous, robot=args.robot)
+        if args.robot and bset.kind != "data":
+            robot_set = materialise(bset, tmp / "robot", per_category=args.per_category,
+                                    seed=args.seed, categories=args.category, progress=progress,
+                                    marker="gt.json", robot=args.robot, **synth)
             variants += [(f"{args.robot} in view, with its twin", robot_set, True),
                          (f"{args.robot} in view, without the twin (ablation)", robot_set, False)]
         progress.start("bench-propose", f"{len(captures)} captures")
@@ -134,8 +130,9 @@ def bench_propose(args: BenchProposeOptions, progress: Progress) -> int:
                              for k, (_, rows, _) in enumerate(tables)},
                           results=json.dumps(tables[0][2]))
     else:
-        print(f"depth noise {args.depth_noise} m, simultaneous {args.simultaneous}, "
-              f"splat iterations {args.iterations}, {len(captures)} captures")
+        print(f"set {bset.label}, seed {args.seed}, depth noise {args.depth_noise} m, "
+              f"simultaneous {args.simultaneous}, splat iterations {args.iterations}, "
+              f"{len(captures)} captures")
         for title, rows, _ in tables:
             if title:
                 print(f"\n{title}:")

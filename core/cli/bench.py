@@ -32,6 +32,8 @@ BENCHMARKS = (
               bench_options.BenchOptimiseOptions, "bench.optimise:bench_optimise"),
     Benchmark("bench-batch", "batch throughput: captures per hour for 1, 2, … local workers",
               bench_options.BenchBatchOptions, "bench.batch:bench_batch"),
+    Benchmark("bench-check", "manipulation success per category (paper's Table II)",
+              bench_options.BenchCheckOptions, "bench.check:bench_check"),
 )
 
 

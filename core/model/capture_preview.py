@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import atomic_path
-from .capture import Capture, load_capture, summarize
+from .capture import Capture, summarize
 from .errors import InputError
 from .sampling import subsample
 

@@ -1,3 +1,6 @@
 """Object categories of the synthetic generator and the benchmarks (the ArtGS paper's seven)."""
 
 CATEGORIES = ("dishwasher", "refrigerator", "oven", "microwave", "storage", "drawer", "cabinet")
+
+#: Kinds beyond the seven that the synthetic generator draws in regimes with variety.
+EXTRA_KINDS = ("door", "washing_machine", "chest")

@@ -26,6 +26,10 @@ DEPENDENCIES = {
     "trimesh": "trimesh",
     "yourdfpy": "yourdfpy",
     "pybullet": "pybullet",
+    "skimage": "scikit-image",
+    "fast_simplification": "fast-simplification",
+    "coacd": "coacd",
+    "mujoco": "mujoco",
 }
 
 

@@ -17,6 +17,14 @@ PART_LABELS = "part_labels.npy"   # int32 part of every splat.ply Gaussian: 0 ba
 PARTS_DIR = "parts"
 URDF = "model.urdf"
 REPORT = "report.json"
+OBJECT_MASK = "object_mask.npy"   # bool per splat.ply Gaussian: part of the object (export)
+CHECK_STRIP = "check.png"         # frames of the manipulation check, one row per joint
+
+
+def joints_file(out: str | Path) -> Path:
+    """The best joints of OUT: ``articulation.json`` if written, else ``proposals.json``."""
+    out = Path(out)
+    return out / ARTICULATION if (out / ARTICULATION).is_file() else out / PROPOSALS
 
 
 def read_report(out: str | Path) -> dict[str, Any]:

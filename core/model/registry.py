@@ -86,12 +86,43 @@ class OptimiseOptions:
     iterations: int = option(300, "steps of the main fit (the later phases take fractions of it)")
     types: bool = option(True, "choose each joint's type by fitting both hypotheses (--no-types: "
                          "keep the proposals' types)")
-    parts: bool = option(True, "remove parts the frames do not show moving (--no-parts: keep "
-                         "every proposed part)")
+    parts: bool = option(True, "remove parts the frames do not show moving and add parts they "
+                         "show moving that no joint explains (--no-parts: the proposed parts)")
     seed: int = option(0, "random seed of the frame sampling")
     device: str = _device()
     max_side: int = _max_side()
     robot_twin: bool = _robot_twin()
+
+
+@dataclass
+class ExportOptions:
+    """Options of ``artgs export``."""
+
+    face_budget: int = option(5000, "most faces of a link's visual mesh")
+    voxel: float | None = option(None, "TSDF voxel size in metres (default: a link's extent / 64)")
+    views: int = option(32, "rendered depth views per link for the TSDF fusion")
+    density: float = option(400.0, "kg/m^3 of the closed part volumes (mass, inertia)")
+    collision_threshold: float = option(0.05, "CoACD concavity threshold of the collision pieces")
+    max_hulls: int = option(16, "most convex pieces per link")
+    effort: float = option(50.0, "joint effort limit (N or N m)")
+    velocity: float = option(1.0, "joint velocity limit (rad/s or m/s)")
+    damping: float = option(0.1, "joint damping")
+    friction: float = option(0.0, "joint friction")
+    separate: str = option("auto", "separate the object from the room (auto: when the capture "
+                           "has no masks)", choices=("auto", "floor", "none"))
+
+
+ROBOTS = ("franka_panda", "xarm6")
+
+
+@dataclass
+class CheckOptions:
+    """Options of ``artgs check``."""
+
+    urdf: str | None = option(None, "URDF to operate (default: OUT/model.urdf); e.g. a ground "
+                              "truth gt.urdf with the joints of OUT/articulation.json as the plan")
+    robot: str = option("franka_panda", "robot from pybullet_data", choices=ROBOTS)
+    frames: int = option(6, "frames per joint in the PNG strip")
 
 
 @dataclass(frozen=True)
@@ -121,6 +152,12 @@ STAGES: tuple[StageSpec, ...] = (
               reads=(layout.SPLAT, layout.PROPOSALS),
               writes=(layout.ARTICULATION, layout.PART_LABELS), options=OptimiseOptions,
               run="stages.optimise.stage:run", check="stages.optimise.stage:check"),
+    StageSpec("export", "Export", "part meshes, collision pieces and OUT/model.urdf, validated",
+              reads=(layout.SPLAT, layout.ARTICULATION), writes=(layout.URDF,),
+              options=ExportOptions, run="stages.export.stage:run"),
+    StageSpec("check", "Check", "a robot opens every part in PyBullet along the estimated joints",
+              reads=(layout.PROPOSALS,), writes=(layout.CHECK_STRIP,),
+              options=CheckOptions, run="stages.check.stage:run", needs_capture=False),
 )
 
 

@@ -19,12 +19,15 @@ collision shape, so the ground truth can be grasped and pushed in PyBullet (mani
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model.categories import CATEGORIES
+from ..model.categories import CATEGORIES, EXTRA_KINDS
+from ..model import atomic
 from ..model.joints import Joint
+from ..sim import urdf
 
 Rgba = tuple[float, float, float, float]
 
@@ -48,6 +51,7 @@ class Part:
     axis: np.ndarray
     limit: tuple[float, float]
     boxes: list[Box]
+    handle: np.ndarray | None = None      # grasp point in the part frame (None: last box centre)
 
     @property
     def child(self) -> str:
@@ -79,11 +83,11 @@ class ObjectSpec:
         states = states or {}
         out = []
         for b in self.body:
-            out.append((self.base_pose @ _translation(b.center), np.array(b.half), "base"))
+            out.append((self.base_pose @ urdf.translation(b.center), np.array(b.half), "base"))
         for q, joint in zip(self.parts, self.joints()):
-            T = joint.transform(states.get(q.name, 0.0)) @ self.base_pose @ _translation(q.origin)
+            T = joint.transform(states.get(q.name, 0.0)) @ self.base_pose @ urdf.translation(q.origin)
             for b in q.boxes:
-                out.append((T @ _translation(b.center), np.array(b.half), q.child))
+                out.append((T @ urdf.translation(b.center), np.array(b.half), q.child))
         return out
 
     def corners(self) -> np.ndarray:
@@ -97,27 +101,41 @@ class ObjectSpec:
         pts = self.corners()
         return pts.min(0), pts.max(0)
 
+    @property
+    def key(self) -> tuple[int, int]:
+        """Seed sequence prefix of this object's random streams."""
+        return (self.seed, KINDS.index(self.category))
+
+    def annotate(self, joints: list[Joint]) -> None:
+        """Set each joint's ``extent`` (part's box in the object's axes, closed) and ``handle``."""
+        R, t = self.base_pose[:3, :3], self.base_pose[:3, 3]
+        for q, joint in zip(self.parts, joints):
+            corners = np.array([np.array(b.center) + sgn * np.array(b.half) for b in q.boxes
+                                for sgn in (np.array([-1, -1, -1]), np.array([1, 1, 1]))]) + q.origin
+            lo, hi = corners.min(0), corners.max(0)
+            joint.extent = {"center": [float(v) for v in R @ ((lo + hi) / 2) + t],
+                            "axes": [[float(v) for v in row] for row in R.T],
+                            "half_size": [float(v) for v in (hi - lo) / 2]}
+            handle = q.handle if q.handle is not None else np.array(q.boxes[-1].center)
+            joint.handle = {"point": [float(v) for v in R @ (handle + q.origin) + t],
+                            "approach": [float(v) + 0.0 for v in -R[:, 0]]}
+
+    def write_gt_urdf(self, root: Path) -> Path:
+        """``root/gt.urdf`` (see :meth:`to_urdf`)."""
+        path = root / "gt.urdf"
+        atomic.write_text(path, self.to_urdf())
+        return path
+
     def to_urdf(self) -> str:
         """URDF text: ``world`` root, fixed ``base_pose`` joint, base link, one link per part."""
-        yaw = math.atan2(self.base_pose[1, 0], self.base_pose[0, 0])
-        lines = ['<?xml version="1.0"?>', f'<robot name="{self.category}">',
-                 '  <link name="world"/>',
-                 '  <joint name="base_pose" type="fixed">',
-                 '    <parent link="world"/>\n    <child link="base"/>',
-                 f'    <origin xyz="{_v(self.base_pose[:3, 3])}" rpy="0 0 {_f(yaw)}"/>',
-                 '  </joint>']
-        lines += _link("base", self.body)
+        links = [urdf.Link("world"), _link("base", self.body)]
+        joints = [urdf.UrdfJoint("base_pose", "fixed", "world", "base", origin=self.base_pose)]
         for q in self.parts:
-            lines += [f'  <joint name="{q.name}" type="{q.type}">',
-                      f'    <parent link="base"/>\n    <child link="{q.child}"/>',
-                      f'    <origin xyz="{_v(q.origin)}" rpy="0 0 0"/>',
-                      f'    <axis xyz="{_v(q.axis)}"/>',
-                      f'    <limit lower="{_f(q.limit[0])}" upper="{_f(q.limit[1])}" '
-                      'effort="10" velocity="1"/>',
-                      '  </joint>']
-            lines += _link(q.child, q.boxes)
-        lines.append("</robot>")
-        return "\n".join(lines) + "\n"
+            links.append(_link(q.child, q.boxes))
+            joints.append(urdf.UrdfJoint(q.name, q.type, "base", q.child,
+                                         origin=urdf.translation(q.origin),
+                                         axis=tuple(float(v) for v in q.axis), limit=q.limit))
+        return urdf.write_urdf(self.category, links, joints)
 
 
 def box_distance(points: np.ndarray, boxes: list[tuple[np.ndarray, np.ndarray, str]]) -> np.ndarray:
@@ -142,7 +160,8 @@ _GAP = 0.004
 class _Builder:
     """Collects the boxes of one object while a category generator lays it out."""
 
-    def __init__(self, rng: np.random.Generator, width: float, depth: float, height: float) -> None:
+    def __init__(self, rng: np.random.Generator, width: float, depth: float, height: float,
+                 variety: bool = False) -> None:
         self.rng = rng
         self.W, self.D, self.H = width, depth, height
         self.body: list[Box] = []
@@ -152,20 +171,29 @@ class _Builder:
         self.front = _shade(self.outer, rng.uniform(0.85, 1.15), rng) if rng.random() < 0.5 \
             else _colour(rng)
         self.handle = _colour(rng, metal=True)
+        self.handle_kind, self.framed = "bar", False
+        if variety:                  # drawn after the plain draws: plain objects stay unchanged
+            if rng.random() < 0.35:
+                self.front = self.outer          # parts in the body's colour (and texture)
+            self.handle_kind = str(rng.choice(HANDLES))
+            self.framed = bool(rng.random() < 0.4)
 
     def panel(self, x0: float, x1: float, y0: float, y1: float, z0: float, z1: float,
               rgba: Rgba | None = None) -> None:
         """A fixed box of the body from its bounds in the object frame."""
         self.body.append(_box(x0, x1, y0, y1, z0, z1, _shade(rgba or self.outer, 1.0, self.rng)))
 
-    def hollow_body(self) -> None:
-        """Back, sides, top and bottom panels; open at the front."""
+    def hollow_body(self, top: bool = True, front: bool = False) -> None:
+        """Back, sides, bottom and (``top``) top panels; open at the front unless ``front``."""
         W, D, H, t = self.W, self.D, self.H, _PANEL
         self.panel(-D / 2, -D / 2 + t, -W / 2, W / 2, 0, H)                     # back
         self.panel(-D / 2, D / 2, -W / 2, -W / 2 + t, 0, H)                     # sides
         self.panel(-D / 2, D / 2, W / 2 - t, W / 2, 0, H)
-        self.panel(-D / 2, D / 2, -W / 2 + t, W / 2 - t, H - t, H)              # top
+        if top:
+            self.panel(-D / 2, D / 2, -W / 2 + t, W / 2 - t, H - t, H)          # top
         self.panel(-D / 2, D / 2, -W / 2 + t, W / 2 - t, 0, t)                  # bottom
+        if front:
+            self.panel(D / 2 - t, D / 2, -W / 2 + t, W / 2 - t, t, H)
 
     def shelf(self, z: float, y0: float | None = None, y1: float | None = None) -> None:
         """A horizontal inner panel (shelf or divider) at height ``z``."""
@@ -179,20 +207,60 @@ class _Builder:
         self.panel(self.D / 2, self.D / 2 + _PANEL, y0 + _GAP / 2, y1 - _GAP / 2,
                    z0 + _GAP / 2, z1 - _GAP / 2, self.front)
 
+    def _frame(self, y0: float, y1: float, z0: float, z1: float, x: float) -> list[Box]:
+        """A raised frame (four strips) on a door face spanning [y0,y1]x[z0,z1] at depth ``x``."""
+        if not self.framed:
+            return []
+        b = min(0.06, 0.12 * min(y1 - y0, z1 - z0))
+        c = _shade(self.front, 0.9, self.rng)
+        return [_box(x, x + 0.012, y0, y1, z0, z0 + b, c), _box(x, x + 0.012, y0, y1, z1 - b, z1, c),
+                _box(x, x + 0.012, y0, y0 + b, z0 + b, z1 - b, c),
+                _box(x, x + 0.012, y1 - b, y1, z0 + b, z1 - b, c)]
+
+    def _grip(self, x: float, y: float, z: float, along: str, length: float, depth: float = 0.03
+              ) -> tuple[list[Box], np.ndarray]:
+        """Handle boxes at the point (x on the face, y, z) of a part frame and its grasp point.
+
+        ``along`` = y or z: the bar's direction for the kind ``bar``; ``long`` bars are 2.5 x as
+        long, ``knob`` is a small cube, ``none`` is a grip recess (no box)."""
+        kind = self.handle_kind
+        if kind == "none":
+            return [], np.array([x, y, z])
+        if kind == "knob":
+            return [_box(x, x + 0.035, y - 0.017, y + 0.017, z - 0.017, z + 0.017, self.handle)], \
+                np.array([x + 0.02, y, z])
+        if kind == "long":
+            length *= 2.5
+        if kind == "horizontal":
+            along = "y" if along == "z" else "z"
+        hy = length / 2 if along == "y" else 0.011
+        hz = length / 2 if along == "z" else 0.011
+        box = _box(x, x + depth, y - hy, y + hy, z - hz, z + hz, self.handle)
+        return [box], np.array(box.center)
+
     def side_door(self, name: str, y0: float, y1: float, z0: float, z1: float, hinge: str,
-                  limit: tuple[float, float]) -> None:
-        """A door covering the front cell [y0,y1]x[z0,z1], hinged on its ``hinge`` (left/right)."""
+                  limit: tuple[float, float], face: float | None = None,
+                  thickness: float = _PANEL, handle_z: float = 0.0) -> None:
+        """A door covering the front cell [y0,y1]x[z0,z1], hinged on its ``hinge`` (left/right).
+
+        Its outer face is at x = ``face`` (default: a panel in front of the body)."""
         y0, y1, z0, z1 = y0 + _GAP / 2, y1 - _GAP / 2, z0 + _GAP / 2, z1 - _GAP / 2
-        t, w, h = _PANEL, y1 - y0, z1 - z0
+        t, w, h = thickness, y1 - y0, z1 - z0
+        face = self.D / 2 + _PANEL if face is None else face
         left = hinge == "left"
-        origin = np.array([self.D / 2 + t, y0 if left else y1, (z0 + z1) / 2])
+        origin = np.array([face, y0 if left else y1, (z0 + z1) / 2])
         s = 1.0 if left else -1.0              # direction from the hinge to the free edge, along y
         axis = np.array([0.0, 0.0, -s])
         boxes = [_box(-t, 0, 0, s * w, -h / 2, h / 2, self.front)]
+        boxes += self._frame(min(0, s * w), max(0, s * w), -h / 2, h / 2, 0.0)
         hl = min(max(0.3 * h, 0.1), 0.5)
         hy = s * (w - min(0.06, 0.15 * w))
-        boxes.append(_box(0.0, 0.03, hy - 0.011, hy + 0.011, -hl / 2, hl / 2, self.handle))
-        self.parts.append(Part(name, "revolute", origin, axis, limit, boxes))
+        hz = float(np.clip(handle_z, -h / 2 + hl, h / 2 - hl)) if handle_z else 0.0
+        if self.handle_kind == "horizontal":
+            hl = min(hl, 0.4 * w)
+            hy = s * (w - 0.04 - hl / 2)
+        grip, point = self._grip(0.0, hy, hz, "z", hl)
+        self.parts.append(Part(name, "revolute", origin, axis, limit, boxes + grip, point))
 
     def bottom_door(self, name: str, y0: float, y1: float, z0: float, z1: float,
                     limit: tuple[float, float]) -> None:
@@ -201,10 +269,29 @@ class _Builder:
         t, w, h = _PANEL, y1 - y0, z1 - z0
         origin = np.array([self.D / 2 + t, (y0 + y1) / 2, z0])
         boxes = [_box(-t, 0, -w / 2, w / 2, 0, h, self.front)]
-        hl = 0.6 * w
+        boxes += self._frame(-w / 2, w / 2, 0, h, 0.0)
         hz = h - min(0.05, 0.15 * h)
-        boxes.append(_box(0.0, 0.03, -hl / 2, hl / 2, hz - 0.011, hz + 0.011, self.handle))
-        self.parts.append(Part(name, "revolute", origin, np.array([0.0, 1.0, 0.0]), limit, boxes))
+        grip, point = self._grip(0.0, 0.0, hz, "y", 0.6 * w if self.handle_kind != "long" else 0.36 * w)
+        self.parts.append(Part(name, "revolute", origin, np.array([0.0, 1.0, 0.0]), limit,
+                               boxes + grip, point))
+
+    def round_door(self, name: str, yc: float, zc: float, r: float, limit: tuple[float, float]
+                   ) -> None:
+        """A round door (a disc of slabs) hinged at its left edge, over a square hole."""
+        t = 0.03
+        origin = np.array([self.D / 2 + _PANEL + t, yc - r, zc])
+        boxes = []
+        n = 9
+        for k in range(n):
+            za, zb = -r + 2 * r * k / n, -r + 2 * r * (k + 1) / n
+            half = math.sqrt(max(r * r - max(za * za, zb * zb), 0.0)) if k not in (n // 2,) else r
+            half = max(half, 0.2 * r)
+            boxes.append(_box(-t, 0, r - half, r + half, za, zb, self.front))
+        boxes.append(_box(-t + 0.002, 0.004, 0.35 * r, 1.65 * r, -0.65 * r, 0.65 * r,
+                          _shade(self.inner, 0.6, self.rng)))                # glass
+        grip, point = self._grip(0.0, 2 * r - 0.04, 0.0, "z", 0.3 * r)
+        self.parts.append(Part(name, "revolute", origin, np.array([0.0, 0.0, -1.0]), limit,
+                               boxes + grip, point))
 
     def drawer(self, name: str, y0: float, y1: float, z0: float, z1: float) -> None:
         """A drawer: front panel over the cell plus a tray (bottom, sides, back) inside the body."""
@@ -220,19 +307,29 @@ class _Builder:
                  _box(x0, -t / 2, -tw, -tw + 0.012, bottom, bottom + th, self.inner),
                  _box(x0, -t / 2, tw - 0.012, tw, bottom, bottom + th, self.inner),
                  _box(x0, x0 + 0.012, -tw + 0.012, tw - 0.012, bottom, bottom + th, self.inner)]
-        hl = min(0.5 * w, 0.3)
-        boxes.append(_box(t / 2, t / 2 + 0.025, -hl / 2, hl / 2, -0.011, 0.011, self.handle))
+        boxes += self._frame(-w / 2, w / 2, -h / 2, h / 2, t / 2)
+        length = min(0.5 * w, 0.3) if self.handle_kind != "long" else 0.35 * w
+        grip, point = self._grip(t / 2, 0.0, 0.0, "y", length, depth=0.025)
         limit = (0.0, float(self.rng.uniform(0.6, 0.85) * tray_depth))
-        self.parts.append(Part(name, "prismatic", origin, np.array([1.0, 0.0, 0.0]), limit, boxes))
+        self.parts.append(Part(name, "prismatic", origin, np.array([1.0, 0.0, 0.0]), limit,
+                               boxes + grip, point))
 
 
-def random_spec(category: str, seed: int) -> ObjectSpec:
-    """A random object of ``category``; the same (category, seed) always gives the same object."""
-    if category not in CATEGORIES:
-        raise ValueError(f"unknown category {category!r}; expected one of {CATEGORIES}")
-    rng = np.random.default_rng([seed, CATEGORIES.index(category)])
-    build = _LAYOUTS[category]
-    b = build(rng)
+#: Handle kinds of objects drawn with variety.
+HANDLES = ("bar", "long", "knob", "horizontal", "none")
+
+
+def random_spec(category: str, seed: int, variety: bool = False) -> ObjectSpec:
+    """A random object of ``category`` (one of :data:`KINDS`); the same (category, seed, variety)
+    always gives the same object. ``variety``: parts may share the body's colour, handles of
+    several kinds or none, framed doors, layouts beyond the plain ones; the object stands on z = 0.
+    """
+    if category not in KINDS:
+        raise ValueError(f"unknown category {category!r}; expected one of {KINDS}")
+    if category not in CATEGORIES and not variety:
+        raise ValueError(f"{category!r} objects exist only with variety")
+    rng = np.random.default_rng([seed, KINDS.index(category)])
+    b = _LAYOUTS[category](rng, variety)
     yaw = rng.uniform(-math.pi, math.pi)
     r = rng.uniform(0.0, 0.5)
     a = rng.uniform(-math.pi, math.pi)
@@ -243,7 +340,7 @@ def random_spec(category: str, seed: int) -> ObjectSpec:
     pose = np.eye(4)
     pose[:3, :3] = np.array([[math.cos(yaw), -math.sin(yaw), 0.0],
                              [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
-    pose[:3, 3] = [r * math.cos(a), r * math.sin(a), z]
+    pose[:3, 3] = [r * math.cos(a), r * math.sin(a), 0.0 if variety else z]
     return ObjectSpec(category, seed, pose, b.body, b.parts)
 
 
@@ -251,8 +348,8 @@ def _revolute_limit(rng: np.random.Generator, lo: float, hi: float) -> tuple[flo
     return (0.0, float(rng.uniform(lo, hi)))
 
 
-def _dishwasher(rng: np.random.Generator) -> _Builder:
-    b = _Builder(rng, rng.uniform(0.55, 0.65), rng.uniform(0.55, 0.65), rng.uniform(0.8, 0.9))
+def _dishwasher(rng: np.random.Generator, variety: bool) -> _Builder:
+    b = _Builder(rng, rng.uniform(0.55, 0.65), rng.uniform(0.55, 0.65), rng.uniform(0.8, 0.9), variety)
     b.hollow_body()
     strip = rng.uniform(0.08, 0.12)
     b.front_strip(-b.W / 2, b.W / 2, b.H - strip, b.H)
@@ -261,8 +358,8 @@ def _dishwasher(rng: np.random.Generator) -> _Builder:
     return b
 
 
-def _oven(rng: np.random.Generator) -> _Builder:
-    b = _Builder(rng, rng.uniform(0.55, 0.76), rng.uniform(0.55, 0.65), rng.uniform(0.55, 0.9))
+def _oven(rng: np.random.Generator, variety: bool) -> _Builder:
+    b = _Builder(rng, rng.uniform(0.55, 0.76), rng.uniform(0.55, 0.65), rng.uniform(0.55, 0.9), variety)
     b.hollow_body()
     strip = rng.uniform(0.1, 0.15)
     plinth = rng.uniform(0.05, 0.12) if rng.random() < 0.5 else 0.0
@@ -274,8 +371,8 @@ def _oven(rng: np.random.Generator) -> _Builder:
     return b
 
 
-def _microwave(rng: np.random.Generator) -> _Builder:
-    b = _Builder(rng, rng.uniform(0.45, 0.65), rng.uniform(0.35, 0.45), rng.uniform(0.3, 0.38))
+def _microwave(rng: np.random.Generator, variety: bool) -> _Builder:
+    b = _Builder(rng, rng.uniform(0.45, 0.65), rng.uniform(0.35, 0.45), rng.uniform(0.3, 0.38), variety)
     b.hollow_body()
     split = b.W / 2 - rng.uniform(0.22, 0.3) * b.W
     b.panel(-b.D / 2 + _PANEL, b.D / 2, split, split + _PANEL, _PANEL, b.H - _PANEL, b.inner)
@@ -284,8 +381,8 @@ def _microwave(rng: np.random.Generator) -> _Builder:
     return b
 
 
-def _refrigerator(rng: np.random.Generator) -> _Builder:
-    b = _Builder(rng, rng.uniform(0.6, 0.9), rng.uniform(0.6, 0.75), rng.uniform(1.4, 1.8))
+def _refrigerator(rng: np.random.Generator, variety: bool) -> _Builder:
+    b = _Builder(rng, rng.uniform(0.6, 0.9), rng.uniform(0.6, 0.75), rng.uniform(1.4, 1.8), variety)
     b.hollow_body()
     layout = rng.choice(["single", "top_bottom", "french"])
     hinge = str(rng.choice(["left", "right"]))
@@ -308,8 +405,8 @@ def _refrigerator(rng: np.random.Generator) -> _Builder:
     return b
 
 
-def _storage(rng: np.random.Generator) -> _Builder:
-    b = _Builder(rng, rng.uniform(0.4, 1.2), rng.uniform(0.35, 0.6), rng.uniform(0.5, 1.8))
+def _storage(rng: np.random.Generator, variety: bool) -> _Builder:
+    b = _Builder(rng, rng.uniform(0.4, 1.2), rng.uniform(0.35, 0.6), rng.uniform(0.5, 1.8), variety)
     b.hollow_body()
     W, H = b.W, b.H
     plinth = rng.uniform(0.05, 0.1) if rng.random() < 0.5 else 0.0
@@ -327,8 +424,8 @@ def _storage(rng: np.random.Generator) -> _Builder:
     return b
 
 
-def _drawer_unit(rng: np.random.Generator) -> _Builder:
-    b = _Builder(rng, rng.uniform(0.4, 1.0), rng.uniform(0.4, 0.6), rng.uniform(0.3, 1.2))
+def _drawer_unit(rng: np.random.Generator, variety: bool) -> _Builder:
+    b = _Builder(rng, rng.uniform(0.4, 1.0), rng.uniform(0.4, 0.6), rng.uniform(0.3, 1.2), variety)
     b.hollow_body()
     W, H = b.W, b.H
     plinth = rng.uniform(0.04, 0.1) if rng.random() < 0.5 else 0.0
@@ -343,10 +440,21 @@ def _drawer_unit(rng: np.random.Generator) -> _Builder:
     return b
 
 
-def _cabinet(rng: np.random.Generator) -> _Builder:
-    b = _Builder(rng, rng.uniform(0.4, 0.9), rng.uniform(0.4, 0.6), rng.uniform(0.7, 1.2))
+def _cabinet(rng: np.random.Generator, variety: bool) -> _Builder:
+    b = _Builder(rng, rng.uniform(0.4, 0.9), rng.uniform(0.4, 0.6), rng.uniform(0.7, 1.2), variety)
     b.hollow_body()
     W, H = b.W, b.H
+    if variety and rng.random() < 0.5:          # a door beside a column of stacked drawers
+        split = -W / 2 + rng.uniform(0.45, 0.6) * W
+        b.panel(-b.D / 2 + _PANEL, b.D / 2, split - _PANEL / 2, split + _PANEL / 2, _PANEL,
+                H - _PANEL, b.inner)
+        b.side_door("door", -W / 2, split, 0.0, H, "left", _revolute_limit(rng, 1.4, 2.0))
+        n = int(rng.integers(2, 4))
+        for k in range(n):
+            if k > 0:
+                b.shelf(H * k / n, split + _PANEL / 2, W / 2 - _PANEL)
+            b.drawer(f"drawer_{k}", split, W / 2, H * k / n, H * (k + 1) / n)
+        return b
     split = H - rng.uniform(0.15, 0.25)
     b.shelf(split)
     b.shelf(split / 2)
@@ -356,9 +464,60 @@ def _cabinet(rng: np.random.Generator) -> _Builder:
     return b
 
 
+def _room_door(rng: np.random.Generator, variety: bool) -> _Builder:
+    """A room door in its frame (posts, lintel, threshold); opens towards the viewer."""
+    b = _Builder(rng, rng.uniform(0.85, 1.1), rng.uniform(0.1, 0.15), rng.uniform(2.0, 2.2), variety)
+    W, D, H = b.W, b.D, b.H
+    post = rng.uniform(0.05, 0.08)
+    b.panel(-D / 2, D / 2, -W / 2, -W / 2 + post, 0, H)
+    b.panel(-D / 2, D / 2, W / 2 - post, W / 2, 0, H)
+    b.panel(-D / 2, D / 2, -W / 2 + post, W / 2 - post, H - post, H)
+    b.panel(-D / 2, D / 2, -W / 2 + post, W / 2 - post, 0, 0.01)
+    b.side_door("door", -W / 2 + post, W / 2 - post, 0.01, H - post,
+                str(rng.choice(["left", "right"])), _revolute_limit(rng, 1.3, 1.8), face=D / 2,
+                thickness=0.04, handle_z=1.0 - (H - post) / 2)
+    return b
+
+
+def _washing_machine(rng: np.random.Generator, variety: bool) -> _Builder:
+    """A front loader: closed body with a control strip and a round door over a square hole."""
+    b = _Builder(rng, rng.uniform(0.58, 0.62), rng.uniform(0.5, 0.62), rng.uniform(0.82, 0.88),
+                 variety)
+    b.hollow_body()
+    W, H = b.W, b.H
+    strip = rng.uniform(0.12, 0.16)
+    b.front_strip(-W / 2, W / 2, H - strip, H)
+    r = rng.uniform(0.16, 0.21)
+    zc = (H - strip) * rng.uniform(0.5, 0.58)
+    a = 0.75 * r
+    b.front_strip(-W / 2, W / 2, 0.0, zc - a)
+    b.front_strip(-W / 2, W / 2, zc + a, H - strip)
+    b.front_strip(-W / 2, -a, zc - a, zc + a)
+    b.front_strip(a, W / 2, zc - a, zc + a)
+    b.round_door("door", 0.0, zc, r, _revolute_limit(rng, 1.4, 1.9))
+    return b
+
+
+def _chest(rng: np.random.Generator, variety: bool) -> _Builder:
+    """A box or chest with a lid hinged at the top of its back."""
+    b = _Builder(rng, rng.uniform(0.4, 1.0), rng.uniform(0.3, 0.6), rng.uniform(0.3, 0.6), variety)
+    b.hollow_body(top=False, front=True)
+    W, D, H, t = b.W, b.D, b.H, _PANEL
+    origin = np.array([-D / 2, 0.0, H])
+    boxes = [_box(0, D, -W / 2, W / 2, 0, t, b.front)]
+    grip, point = b._grip(D, 0.0, -0.01, "y", min(0.3 * W, 0.2), depth=0.025)
+    b.parts.append(Part("lid", "revolute", origin, np.array([0.0, -1.0, 0.0]),
+                        _revolute_limit(rng, 1.2, 1.9), boxes + grip, point))
+    return b
+
+
 _LAYOUTS = {"dishwasher": _dishwasher, "refrigerator": _refrigerator, "oven": _oven,
             "microwave": _microwave, "storage": _storage, "drawer": _drawer_unit,
-            "cabinet": _cabinet}
+            "cabinet": _cabinet, "door": _room_door, "washing_machine": _washing_machine,
+            "chest": _chest}
+
+#: Everything the generator makes: the seven categories, then kinds drawn only with variety.
+KINDS = CATEGORIES + EXTRA_KINDS
 
 
 # --------------------------------------------------------------------------- helpers
@@ -391,34 +550,9 @@ def _hsv(h: float, s: float, v: float) -> tuple[float, float, float]:
     return [(v, t, p_), (q, v, p_), (p_, v, t), (p_, q, v), (t, p_, v), (v, p_, q)][i]
 
 
-def _translation(xyz) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = xyz
-    return T
-
-
-def _f(x: float) -> str:
-    return f"{float(x):.9g}"
-
-
-def _v(v) -> str:
-    return " ".join(_f(x) for x in v)
-
-
-def _link(name: str, boxes: list[Box]) -> list[str]:
-    lines = [f'  <link name="{name}">',
-             '    <inertial><mass value="1"/>'
-             '<inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>']
-    for k, b in enumerate(boxes):
-        size = " ".join(_f(2 * h) for h in b.half)
-        lines += ['    <visual>',
-                  f'      <origin xyz="{_v(b.center)}" rpy="0 0 0"/>',
-                  f'      <geometry><box size="{size}"/></geometry>',
-                  f'      <material name="{name}_{k}"><color rgba="{_v(b.rgba)}"/></material>',
-                  '    </visual>',
-                  '    <collision>',
-                  f'      <origin xyz="{_v(b.center)}" rpy="0 0 0"/>',
-                  f'      <geometry><box size="{size}"/></geometry>',
-                  '    </collision>']
-    lines.append("  </link>")
-    return lines
+def _link(name: str, boxes: list[Box]) -> urdf.Link:
+    """A link whose boxes are both visual and collision shapes (unit mass, nominal inertia)."""
+    shapes = [(urdf.Box(tuple(2 * h for h in b.half)), urdf.translation(b.center), b.rgba)
+              for b in boxes]
+    return urdf.Link(name, [urdf.Geometry(s, T, rgba) for s, T, rgba in shapes],
+                     [urdf.Geometry(s, T) for s, T, _ in shapes], urdf.Inertial(1.0))

@@ -252,7 +252,7 @@ class _Arm:
 
 
 class RobotInScene:
-    """The planned robot in a render client (core/synth/render.py's Scene), loaded at its first
+    """The planned robot in a render client (core/sim/client.py's Scene), loaded at its first
     :meth:`show` (the static views come first and must not see it). Loaded at the base pose
     rather than moved there: PyBullet's base reset places the base's centre of mass, not its
     link frame."""

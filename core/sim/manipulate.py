@@ -1,0 +1,400 @@
+"""A robot opens one part of an articulated URDF in PyBullet along a PLANNED joint (the paper's
+manipulation check, shared/spec/metrics.md).
+
+One episode per joint, in its own ``DIRECT`` client:
+
+- the object URDF is loaded with a fixed base; the operated joint is free, the others are held
+  closed; each part weighs ``PART_MASS`` so the outcome measures the joint, not the payload;
+- the robot (``pybullet_data``) stands on a pedestal in front of the handle, facing along the
+  approach direction; its base is the candidate place from which inverse kinematics reaches the
+  whole planned handle path best;
+- it starts at the grasp pose and holds the handle: a point-to-point constraint between the
+  gripper's grasp point and the part, limited to ``GRASP_FORCE`` (a parallel gripper's holding
+  force times friction 1); collisions between robot and object are off;
+- the gripper follows the handle path of the PLANNED joint (minimum-jerk in the joint value) under
+  Cartesian impedance control, tau = J^T (K (x_d - x) - D xdot) + g(q) (gravity compensation
+  from inverse dynamics), plus joint damping in the null space;
+- the grasp is lost when the gripper and the grasped point drift ``LOST_DISTANCE`` apart;
+  success when the TRUE joint (the URDF's) reaches the target of metrics.md with the grasp held.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..model.joints import Joint, joint_transform
+
+DT = 1.0 / 240.0
+GRASP_FORCE = 70.0          # N
+LOST_DISTANCE = 0.02        # m
+PART_MASS = 1.0             # kg
+K_POS, D_POS = 1500.0, 40.0
+K_ROT, D_ROT = 15.0, 0.3
+NULL_STIFFNESS, NULL_DAMPING = 2.0, 0.5
+OVERSHOOT = 1.15            # the plan goes this much past the target
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """A robot of pybullet_data: URDF, grasp-point link, a rest pose of its arm joints."""
+
+    urdf: str
+    ee_link: str
+    rest: tuple[float, ...]
+    fingers: tuple[str, ...] = ()
+
+
+ROBOT_MODELS = {
+    "franka_panda": RobotModel("franka_panda/panda.urdf", "panda_grasptarget",
+                               (0.0, -0.3, 0.0, -2.3, 0.0, 3.3, 0.785),
+                               ("panda_finger_joint1", "panda_finger_joint2")),
+    "xarm6": RobotModel("xarm/xarm6_robot.urdf", "link6", (0.0, -0.5, -0.5, 0.0, -0.5, 0.0)),
+}
+
+
+@dataclass
+class Task:
+    """Open the URDF joint ``true_joint`` by following the ``planned`` (estimated) joint, grasping
+    at ``handle`` (world) approached along ``approach`` (unit, world, towards the part)."""
+
+    true_joint: str
+    planned: Joint
+    handle: np.ndarray
+    approach: np.ndarray
+
+
+@dataclass
+class Outcome:
+    """What happened in one episode."""
+
+    joint: str
+    success: bool
+    reached: float
+    target: float
+    grasp_lost: bool
+    reason: str
+    seconds: float
+    max_tracking_error: float
+    frames: list[np.ndarray] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"success": self.success, "reached": round(self.reached, 5),
+                "target": round(self.target, 5), "grasp_lost": self.grasp_lost,
+                "reason": self.reason, "seconds": round(self.seconds, 2),
+                "max_tracking_error_m": round(self.max_tracking_error, 4)}
+
+
+def target_value(kind: str, limit: tuple[float, float]) -> float:
+    """Signed joint value to reach (metrics.md): revolute 45 deg or 80 % of the range if smaller,
+    prismatic 80 % of the range, at most 0.25 m; towards the larger end of the range from 0."""
+    lo, hi = limit
+    sign = 1.0 if abs(hi) >= abs(lo) else -1.0
+    span = hi - lo
+    amount = min(math.pi / 4, 0.8 * span) if kind == "revolute" else min(0.8 * span, 0.25)
+    return sign * amount
+
+
+def world_joints(body: int, client: int) -> dict[str, Joint]:
+    """The movable joints of a loaded body in the world frame at its current (zero) state."""
+    import pybullet as p
+
+    out = {}
+    for i in range(p.getNumJoints(body, physicsClientId=client)):
+        info = p.getJointInfo(body, i, physicsClientId=client)
+        if info[2] not in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
+            continue
+        state = p.getLinkState(body, i, computeForwardKinematics=1, physicsClientId=client)
+        R = np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+        kind = "revolute" if info[2] == p.JOINT_REVOLUTE else "prismatic"
+        out[info[1].decode()] = Joint(info[1].decode(), kind, R @ np.array(info[13]),
+                                      np.array(state[4]), (info[8], info[9]),
+                                      child=info[12].decode())
+    return out
+
+
+def run_episode(object_urdf: str, task: Task, robot: str = "franka_panda", frames: int = 6,
+                size: tuple[int, int] = (160, 120)) -> Outcome:
+    """One episode (see the module docstring); ``frames`` images of it for the strip."""
+    import pybullet as p
+    import pybullet_data
+
+    start = time.perf_counter()
+    model = ROBOT_MODELS[robot]
+    client = p.connect(p.DIRECT)
+    try:
+        p.setGravity(0, 0, -9.81, physicsClientId=client)
+        p.setTimeStep(DT, physicsClientId=client)
+        obj = p.loadURDF(object_urdf, useFixedBase=True, physicsClientId=client)
+        truth = world_joints(obj, client)
+        if task.true_joint not in truth:
+            raise ValueError(f"{object_urdf} has no movable joint {task.true_joint!r}")
+        true = truth[task.true_joint]
+        index = {p.getJointInfo(obj, i, physicsClientId=client)[1].decode(): i
+                 for i in range(p.getNumJoints(obj, physicsClientId=client))}
+        link = index[task.true_joint]
+        for name, i in index.items():
+            if name in truth:
+                held = name != task.true_joint
+                p.setJointMotorControl2(obj, i, p.VELOCITY_CONTROL, targetVelocity=0,
+                                        force=1e4 if held else 0.2, physicsClientId=client)
+                p.changeDynamics(obj, i, mass=PART_MASS, physicsClientId=client)
+        target = target_value(true.type, true.limit)
+
+        plan_sign = math.copysign(1.0, target_value(task.planned.type, task.planned.limit)
+                                  if task.planned.limit != (0.0, 0.0) else 1.0)
+        plan_end = plan_sign * OVERSHOOT * abs(target)
+        grasp_pose = _grasp_pose(task.handle, task.approach)
+        path = [joint_transform(task.planned.type, task.planned.axis, task.planned.origin,
+                                plan_end * s) @ grasp_pose for s in np.linspace(0, 1, 7)]
+        bot = _place_robot(model, path, client, pybullet_data.getDataPath())
+        for i in range(-1, p.getNumJoints(obj, physicsClientId=client)):
+            for j in range(-1, p.getNumJoints(bot.body, physicsClientId=client)):
+                p.setCollisionFilterPair(obj, bot.body, i, j, 0, physicsClientId=client)
+        reach = float(np.linalg.norm(bot.ee_pose()[:3, 3] - grasp_pose[:3, 3]))
+        if reach > 0.02:
+            return Outcome(task.true_joint, False, 0.0, target, False,
+                           f"handle out of reach ({reach:.3f} m)", time.perf_counter() - start,
+                           reach, [])
+        com = p.getLinkState(obj, link, physicsClientId=client)
+        local = _inverse_point(com[0], com[1], task.handle, client)
+        cid = p.createConstraint(bot.body, bot.ee, obj, link, p.JOINT_POINT2POINT, [0, 0, 0],
+                                 bot.ee_com_offset, local, physicsClientId=client)
+        p.changeConstraint(cid, maxForce=GRASP_FORCE, physicsClientId=client)
+
+        duration = 3.0
+        steps, hold = int(duration / DT), int(1.0 / DT)
+        shots = set(np.linspace(0, steps + hold - 1, frames).round().astype(int).tolist())
+        camera = _camera(task.handle, task.approach, path[-1][:3, 3], size)
+        images, lost, worst, reached = [], False, 0.0, 0.0
+        for k in range(steps + hold):
+            s = min(k / steps, 1.0)
+            value = plan_end * (10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5)
+            goal = joint_transform(task.planned.type, task.planned.axis, task.planned.origin,
+                                   value) @ grasp_pose
+            worst = max(worst, bot.impedance_step(goal))
+            p.stepSimulation(physicsClientId=client)
+            reached = p.getJointState(obj, link, physicsClientId=client)[0]
+            if not lost:
+                state = p.getLinkState(obj, link, physicsClientId=client)
+                held_at = _point(state[0], state[1], local, client)
+                if np.linalg.norm(held_at - bot.ee_pose()[:3, 3]) > LOST_DISTANCE:
+                    lost = True
+                    p.removeConstraint(cid, physicsClientId=client)
+            if k in shots:
+                images.append(_render(camera, size, client))
+        opened = reached * math.copysign(1.0, target) >= abs(target) - 1e-3
+        success = opened and not lost
+        reason = "opened" if success else ("grasp lost" if lost else "did not reach the target")
+        return Outcome(task.true_joint, success, float(reached), target, lost, reason,
+                       time.perf_counter() - start, worst, images)
+    finally:
+        p.disconnect(client)
+
+
+class _Robot:
+    """The arm in a client: torque-controlled Cartesian impedance at its grasp-point link."""
+
+    def __init__(self, model: RobotModel, body: int, base: np.ndarray, client: int) -> None:
+        import pybullet as p
+
+        self.p, self.body, self.client, self.model = p, body, client, model
+        names = {}
+        self.movable = []
+        for i in range(p.getNumJoints(body, physicsClientId=client)):
+            info = p.getJointInfo(body, i, physicsClientId=client)
+            names[info[12].decode()] = i
+            names[info[1].decode()] = i
+            if info[2] != p.JOINT_FIXED:
+                self.movable.append(i)
+        self.ee = names[model.ee_link]
+        self.arm = self.movable[:len(model.rest)]
+        info = [p.getJointInfo(body, i, physicsClientId=client) for i in self.movable]
+        self.lower = [i[8] for i in info]
+        self.upper = [i[9] for i in info]
+        self.rest = list(model.rest) + [0.0] * (len(self.movable) - len(model.rest))
+        self.fingers = [names[f] for f in model.fingers]
+        state = p.getLinkState(body, self.ee, physicsClientId=client)
+        # the grasp point (link frame origin) in the link's centre-of-mass frame
+        inv_pos, inv_orn = p.invertTransform(state[2], state[3])
+        self.ee_com_offset = list(inv_pos)
+        self.base = base
+
+    def set_arm(self, q) -> None:
+        for i, v in zip(self.arm, q):
+            self.p.resetJointState(self.body, i, float(v), physicsClientId=self.client)
+        for i in self.fingers:
+            self.p.resetJointState(self.body, i, 0.0, physicsClientId=self.client)
+
+    def ik(self, pose: np.ndarray) -> list[float]:
+        """Arm joint values reaching ``pose`` (seeded from the rest pose)."""
+        p = self.p
+        self.set_arm(self.model.rest)
+        quat = _quat(pose[:3, :3])
+        for _ in range(3):
+            sol = p.calculateInverseKinematics(
+                self.body, self.ee, pose[:3, 3].tolist(), quat, lowerLimits=self.lower,
+                upperLimits=self.upper, jointRanges=[u - lo for lo, u in zip(self.lower, self.upper)],
+                restPoses=self.rest, maxNumIterations=200, residualThreshold=1e-6,
+                physicsClientId=self.client)
+            sol = np.clip(sol, self.lower, self.upper)
+            self.set_arm(sol[:len(self.arm)])
+        return list(sol[:len(self.arm)])
+
+    def ee_pose(self) -> np.ndarray:
+        s = self.p.getLinkState(self.body, self.ee, computeForwardKinematics=1,
+                                physicsClientId=self.client)
+        T = np.eye(4)
+        T[:3, :3] = np.array(self.p.getMatrixFromQuaternion(s[5])).reshape(3, 3)
+        T[:3, 3] = s[4]
+        return T
+
+    def release_motors(self) -> None:
+        p = self.p
+        p.setJointMotorControlArray(self.body, self.arm, p.VELOCITY_CONTROL,
+                                    forces=[0.0] * len(self.arm), physicsClientId=self.client)
+        if self.fingers:
+            p.setJointMotorControlArray(self.body, self.fingers, p.POSITION_CONTROL,
+                                        targetPositions=[0.0] * len(self.fingers),
+                                        forces=[20.0] * len(self.fingers),
+                                        physicsClientId=self.client)
+
+    def impedance_step(self, goal: np.ndarray) -> float:
+        """Apply tau = J^T (K e - D v) + g(q) for one step; returns the position error."""
+        p, c = self.p, self.client
+        states = p.getJointStates(self.body, self.movable, physicsClientId=c)
+        q = [s[0] for s in states]
+        qd = [s[1] for s in states]
+        ls = p.getLinkState(self.body, self.ee, computeLinkVelocity=1, computeForwardKinematics=1,
+                            physicsClientId=c)
+        x = np.array(ls[4])
+        R = np.array(p.getMatrixFromQuaternion(ls[5])).reshape(3, 3)
+        v, w = np.array(ls[6]), np.array(ls[7])
+        e_pos = goal[:3, 3] - x
+        e_rot = _rotvec(goal[:3, :3] @ R.T)
+        J_lin, J_ang = p.calculateJacobian(self.body, self.ee, self.ee_com_offset, q,
+                                           [0.0] * len(q), [0.0] * len(q), physicsClientId=c)
+        # PyBullet gives the Jacobian in the base frame: rotate it into the world
+        Rb = np.array(p.getMatrixFromQuaternion(
+            p.getBasePositionAndOrientation(self.body, physicsClientId=c)[1])).reshape(3, 3)
+        J = np.vstack([Rb @ np.array(J_lin), Rb @ np.array(J_ang)])[:, :len(self.arm)]
+        wrench = np.concatenate([K_POS * e_pos - D_POS * v, K_ROT * e_rot - D_ROT * w])
+        gravity = np.array(p.calculateInverseDynamics(self.body, q, [0.0] * len(q),
+                                                      [0.0] * len(q), physicsClientId=c))
+        qd_arm = np.array(qd[:len(self.arm)])
+        null = np.eye(len(self.arm)) - J.T @ np.linalg.pinv(J.T)
+        rest = np.array(self.rest[:len(self.arm)]) - np.array(q[:len(self.arm)])
+        tau = J.T @ wrench + gravity[:len(self.arm)] + null @ (NULL_STIFFNESS * rest
+                                                              - NULL_DAMPING * qd_arm)
+        p.setJointMotorControlArray(self.body, self.arm, p.TORQUE_CONTROL, forces=tau.tolist(),
+                                    physicsClientId=c)
+        return float(np.linalg.norm(e_pos))
+
+
+def _place_robot(model: RobotModel, path: list[np.ndarray], client: int, data: str) -> _Robot:
+    """The robot at the candidate base pose from which IK reaches the planned path best."""
+    import pybullet as p
+
+    start, end = path[0][:3, 3], path[-1][:3, 3]
+    approach = path[0][:3, 2].copy()
+    approach[2] = 0.0
+    approach = approach / max(np.linalg.norm(approach), 1e-9)
+    side = np.cross([0.0, 0.0, 1.0], approach)
+    mid = (start + end) / 2
+    yaw = math.atan2(approach[1], approach[0])
+    body = p.loadURDF(os.path.join(data, model.urdf), useFixedBase=True,
+                      physicsClientId=client,
+                      flags=p.URDF_USE_INERTIA_FROM_FILE)
+    best, best_err = None, np.inf
+    for d in (0.45, 0.6, 0.75):
+        for lateral in (-0.2, 0.0, 0.2):
+            for dz in (-0.5, -0.3):
+                base = mid - d * approach + lateral * side
+                base[2] = mid[2] + dz
+                p.resetBasePositionAndOrientation(body, base.tolist(),
+                                                  p.getQuaternionFromEuler([0, 0, yaw]),
+                                                  physicsClientId=client)
+                robot = _Robot(model, body, base, client)
+                err = 0.0
+                for pose in path[::2]:
+                    q = np.array(robot.ik(pose))
+                    e = robot.ee_pose()
+                    margin = np.minimum(q - robot.lower[:len(q)], robot.upper[:len(q)] - q).min()
+                    err = max(err, float(np.linalg.norm(e[:3, 3] - pose[:3, 3]))
+                              + 0.05 * float(np.linalg.norm(_rotvec(pose[:3, :3] @ e[:3, :3].T)))
+                              + 0.05 * max(0.0, 0.3 - float(margin)))
+                if err < best_err:
+                    best, best_err = base, err
+    p.resetBasePositionAndOrientation(body, best.tolist(), p.getQuaternionFromEuler([0, 0, yaw]),
+                                      physicsClientId=client)
+    robot = _Robot(model, body, best, client)
+    robot.set_arm(robot.ik(path[0]))
+    robot.release_motors()
+    return robot
+
+
+def _grasp_pose(handle: np.ndarray, approach: np.ndarray) -> np.ndarray:
+    """Gripper pose at the handle: z along the approach, x up, fingers closing horizontally."""
+    z = np.asarray(approach, float) / np.linalg.norm(approach)
+    x = np.array([0.0, 0.0, 1.0]) - z[2] * z
+    if np.linalg.norm(x) < 1e-6:
+        x = np.array([1.0, 0.0, 0.0]) - z[0] * z
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, y, z], axis=1)
+    T[:3, 3] = handle
+    return T
+
+
+def _rotvec(R: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(R).as_rotvec()
+
+
+def _quat(R: np.ndarray) -> list[float]:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(R).as_quat().tolist()      # x y z w, as PyBullet
+
+
+def _inverse_point(pos, orn, point, client: int) -> list[float]:
+    import pybullet as p
+
+    inv_pos, inv_orn = p.invertTransform(pos, orn)
+    return list(p.multiplyTransforms(inv_pos, inv_orn, list(map(float, point)), [0, 0, 0, 1])[0])
+
+
+def _point(pos, orn, local, client: int) -> np.ndarray:
+    import pybullet as p
+
+    return np.array(p.multiplyTransforms(pos, orn, local, [0, 0, 0, 1])[0])
+
+
+def _camera(handle: np.ndarray, approach: np.ndarray, end: np.ndarray, size) -> tuple:
+    """View and projection matrices looking at the handle's path from the robot's side, above."""
+    import pybullet as p
+
+    centre = (np.asarray(handle) + np.asarray(end)) / 2
+    a = np.asarray(approach, float).copy()
+    a[2] = 0
+    a /= max(np.linalg.norm(a), 1e-9)
+    side = np.cross([0.0, 0.0, 1.0], a)
+    eye = centre - 1.6 * a + 1.0 * side + np.array([0.0, 0.0, 0.8])
+    view = p.computeViewMatrix(eye.tolist(), centre.tolist(), [0, 0, 1])
+    proj = p.computeProjectionMatrixFOV(60, size[0] / size[1], 0.05, 10.0)
+    return view, proj
+
+
+def _render(camera: tuple, size, client: int) -> np.ndarray:
+    import pybullet as p
+
+    w, h = size
+    _, _, rgba, _, _ = p.getCameraImage(w, h, viewMatrix=camera[0], projectionMatrix=camera[1],
+                                        renderer=p.ER_TINY_RENDERER, physicsClientId=client)
+    return np.asarray(rgba, np.uint8).reshape(h, w, 4)[:, :, :3].copy()

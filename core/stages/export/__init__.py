@@ -1,0 +1,1 @@
+"""``artgs export``: part meshes, collision pieces and the URDF from the splat."""
