@@ -3,8 +3,9 @@
     blender --background --python scripts/headless_pipeline.py -- CAPTURE OUT [options]
     python scripts/headless_pipeline.py CAPTURE OUT [options]        (bpy as a module)
 
-Imports the capture, reconstructs the splat and proposes the joints as an armature (each stage in
-the engine worker, as in the UI), then writes OUT/scene.blend and OUT/preview.png (the engine's
+Imports the capture, reconstructs the splat, proposes the joints as an armature, optimises them,
+exports the URDF and lets a robot check it (each stage in the engine worker, as in the UI; stop
+earlier with ``--until``), then writes OUT/scene.blend and OUT/preview.png (the engine's
 labelled contact sheet of every stage) next to the engine's outputs. Inside Blender the enabled extension whose module ends in ``.artgs`` is used
 (enabled first if installed but off); with bpy as a module the ``artgs`` package is enabled.
 Exits 1 with the engine's message if a stage fails.
@@ -22,6 +23,10 @@ import bpy  # first: with bpy as a module, importing it puts addon_utils on the 
 import addon_utils  # noqa: E402
 
 
+#: Stages after the proposals, in order, as the add-on's operators run them.
+UNTIL = ("bones", "optimise", "export", "check")
+
+
 def _argv() -> list[str]:
     """The script's own arguments (after ``--`` when run by the Blender binary)."""
     return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
@@ -35,6 +40,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                    help="joint proposal method")
     p.add_argument("--iterations", type=int, default=0,
                    help="reconstruction iteration cap (0: until converged)")
+    p.add_argument("--optimise-iterations", type=int, default=0,
+                   help="steps of the joint optimisation's main fit (0: the engine's default)")
+    p.add_argument("--until", choices=UNTIL, default=UNTIL[-1],
+                   help="last stage to run (default: all of them)")
     p.add_argument("--engine", default="", help="engine interpreter (default: the preference)")
     p.add_argument("--preview-size", type=int, default=240,
                    help="width of one panel of preview.png (the contact sheet), pixels")
@@ -90,7 +99,7 @@ def contact_sheet(module: str, capture: Path, out: Path, width: int,
 
 
 def run(args: argparse.Namespace, module: str) -> None:
-    """Import, reconstruct, propose; save OUT/scene.blend and OUT/preview.png."""
+    """Every stage through the operators; save OUT/scene.blend and OUT/preview.png."""
     capture, out = args.capture.resolve(), args.out.resolve()
     out.mkdir(parents=True, exist_ok=True)
     clear_scene()
@@ -104,7 +113,15 @@ def run(args: argparse.Namespace, module: str) -> None:
     run_stage("import capture", bpy.ops.artgs.import_capture)
     run_stage("reconstruct", bpy.ops.artgs.reconstruct, iterations=args.iterations)
     run_stage("propose bones", bpy.ops.artgs.propose_bones)
-    for stage in ("capture", "splat", "bones"):
+    steps = UNTIL[:UNTIL.index(args.until) + 1]
+    if "optimise" in steps:
+        run_stage("optimise joints", bpy.ops.artgs.optimise_joints,
+                  iterations=args.optimise_iterations)
+    if "export" in steps:
+        run_stage("export URDF", bpy.ops.artgs.export_urdf)
+    if "check" in steps:
+        run_stage("check manipulation", bpy.ops.artgs.check_manipulation)
+    for stage in ("capture", "splat", "bones", "optimise", "export")[:2 + min(len(steps), 3)]:
         print(f"  {stage}: {settings.stage(stage).text}")
     contact_sheet(module, capture, out, args.preview_size, args.panels)
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "scene.blend"))

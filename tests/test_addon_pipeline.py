@@ -58,7 +58,7 @@ def test_headless_pipeline(tmp_path):
     driver = _DRIVER.format(script=str(ROOT / "scripts" / "headless_pipeline.py"),
                             blend=str(out / "scene.blend"), heavy=HEAVY)
     proc = subprocess.run([sys.executable, "-c", driver, str(capture), str(out),
-                           "--iterations", "10", "--preview-size", "160", "--engine", engine_python(),
+                           "--iterations", "10", "--until", "bones", "--preview-size", "160", "--engine", engine_python(),
                            "--panels", str(out / "stages")],
                           capture_output=True, text=True, timeout=600, cwd=tmp_path)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("CHECK ")]
