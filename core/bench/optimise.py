@@ -25,6 +25,7 @@ import numpy as np
 from ..geometry.metrics import match_joints
 from ..model import layout
 from ..model.capture import load_capture
+from ..model.errors import NothingFound
 from ..model.joints import Articulation, read_articulation, rotation_about_axis, write_articulation
 from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
@@ -69,7 +70,12 @@ def bench_capture(capture_dir: Path, work: Path, options, iterations: int = 0, b
         reconstruct(capture, out, QUIET, iterations=iterations, device=options.device)
     else:
         write_ply(out / layout.SPLAT, initial_splats(capture.static)[0])
-    proposals = propose(capture, out, QUIET, ProposeOptions(method="motion", device=options.device))
+    try:
+        proposals = propose(capture, out, QUIET,
+                            ProposeOptions(method="motion", device=options.device))
+    except NothingFound:   # the motion route found nothing: the optimisation starts from no joints
+        proposals = Articulation([], {"source": "motion"})
+        write_articulation(out / layout.PROPOSALS, proposals)
     t0 = time.perf_counter()
     optimise(out, capture, QUIET, options)
     seconds = time.perf_counter() - t0
