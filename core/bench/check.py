@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..model import layout, registry
 from ..model.capture import load_capture
-from ..model.errors import InputError
+from ..model.errors import InputError, NothingFound
 from ..model.joints import read_articulation
 from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
@@ -49,8 +49,13 @@ def bench_capture(capture_dir: Path, work: Path, options: BenchCheckOptions) -> 
         reconstruct(capture, out, QUIET, iterations=options.iterations, device=options.device)
     else:
         write_ply(out / layout.SPLAT, initial_splats(capture.static)[0])
-    propose(capture, out, QUIET, ProposeOptions(method="motion", device=options.device))
-    result = {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name)}
+    result = {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name),
+              "seconds_per_check": 0.0}
+    try:
+        propose(capture, out, QUIET, ProposeOptions(method="motion", device=options.device))
+    except NothingFound:                       # every part counts as not opened
+        missed = {j.name: {"success": False, "reason": "no joints proposed"} for j in gt.joints}
+        return {**result, "proposals": missed, "optimised": missed}
     t0 = time.perf_counter()
     result["proposals"] = check_out(out, capture_dir / "gt.urdf", options.robot)
     result["seconds_per_check"] = (time.perf_counter() - t0) / max(len(result["proposals"]), 1)
