@@ -49,6 +49,8 @@ def make_out(out: Path, category: str = "cabinet", seed: int = 0) -> tuple[Objec
     out.mkdir(parents=True, exist_ok=True)
     write_ply(out / layout.SPLAT, splat_of(spec))
     joints = spec.joints()
+    for joint in joints:
+        joint.states = {0: 0.0}
     spec.annotate(joints)
     art = Articulation(joints, {"category": spec.category, "seed": spec.seed})
     write_articulation(out / layout.ARTICULATION, art)
