@@ -1,6 +1,7 @@
 """``artgs bench-check``: manipulation success per category, in the layout of the paper's Table II.
 
-For each synthetic capture (generated, or ``--data``): propose joints (motion route, on the
+For each capture of the benchmark set (core/bench/sets.py: ``--set tight|realistic|partnet:DIR|
+data:DIR``): propose joints (motion route, on the
 depth-initialised splat unless ``--iterations``), then a robot opens every part of the capture's
 ground-truth ``gt.urdf`` along the proposed joints (core/sim/manipulate.py): "proposals only".
 When the project has an ``optimise`` stage it is run next and the check repeated: "with
@@ -17,12 +18,13 @@ from pathlib import Path
 
 from ..model import layout, registry
 from ..model.capture import load_capture
-from ..model.errors import InputError
+from ..model.errors import InputError, NothingFound
 from ..model.joints import read_articulation
 from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
 from ..model.registry import CheckOptions, ProposeOptions
 from .options import BenchCheckOptions
+from .sets import materialise, parse_set
 
 
 def check_out(out: Path, urdf: Path, robot: str) -> dict[str, dict]:
@@ -47,8 +49,13 @@ def bench_capture(capture_dir: Path, work: Path, options: BenchCheckOptions) -> 
         reconstruct(capture, out, QUIET, iterations=options.iterations, device=options.device)
     else:
         write_ply(out / layout.SPLAT, initial_splats(capture.static)[0])
-    propose(capture, out, QUIET, ProposeOptions(method="motion", device=options.device))
-    result = {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name)}
+    result = {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name),
+              "seconds_per_check": 0.0}
+    try:
+        propose(capture, out, QUIET, ProposeOptions(method="motion", device=options.device))
+    except NothingFound:                       # every part counts as not opened
+        missed = {j.name: {"success": False, "reason": "no joints proposed"} for j in gt.joints}
+        return {**result, "proposals": missed, "optimised": missed}
     t0 = time.perf_counter()
     result["proposals"] = check_out(out, capture_dir / "gt.urdf", options.robot)
     result["seconds_per_check"] = (time.perf_counter() - t0) / max(len(result["proposals"]), 1)
@@ -78,20 +85,19 @@ def table(results: list[dict]) -> str:
 
 
 def bench_check(args: BenchCheckOptions, progress: Progress) -> int:
-    """``artgs bench-check [--data DIR] [--per-category N] [--seed S] [--category C ...]``."""
+    """``artgs bench-check [--set tight|realistic|partnet:DIR|data:DIR] [--per-category N]
+    [--seed S] [--category C ...]``."""
     with tempfile.TemporaryDirectory(prefix="artgs-bench-check-") as tmp:
         tmp = Path(tmp)
-        if args.data:
-            data = Path(args.data)
-            captures = sorted(p.parent for p in data.glob("*/gt.json")
-                              if (p.parent / "gt.urdf").is_file())
-            if not captures:
-                raise InputError(data, "no capture folders with gt.json and gt.urdf inside (make "
-                                 "one with `artgs synth`)")
-        else:
-            from ..synth.generate import generate_set
-            captures = generate_set(tmp / "data", args.category, args.per_category, args.seed,
-                                    progress, width=args.width, height=args.height)
+        bset = parse_set(args.set, args.data)
+        captures = [c for c in materialise(bset, tmp / "data", per_category=args.per_category,
+                                           seed=args.seed, categories=args.category,
+                                           progress=progress, marker="gt.json",
+                                           **({} if bset.kind == "data" else
+                                              {"width": args.width, "height": args.height}))
+                    if (c / "gt.urdf").is_file()]
+        if not captures:
+            raise InputError(bset.label, "no captures with gt.json and gt.urdf", field="set")
         progress.start("bench-check", f"{len(captures)} captures")
         results = []
         for k, cap in enumerate(captures):
@@ -104,6 +110,7 @@ def bench_check(args: BenchCheckOptions, progress: Progress) -> int:
     if progress.mode == "json":
         progress.finished(results=json.dumps(results))
     else:
-        print(f"robot {args.robot}, splat iterations {args.iterations}, {len(captures)} captures")
+        print(f"set {bset.label}, robot {args.robot}, splat iterations {args.iterations}, "
+              f"{len(captures)} captures")
         print(table(results))
     return 0

@@ -103,7 +103,8 @@ class BenchBatchOptions:
 class BenchCheckOptions:
     """``artgs bench-check``: manipulation success per category (the paper's Table II)."""
 
-    data: str | None = option(None, "benchmark set from `artgs synth` (default: generate one)")
+    set: str | None = option(None, SET_HELP)
+    data: str | None = option(None, "folder of `artgs synth` captures (same as --set data:DIR)")
     per_category: int = option(2, "objects per category (generated sets)")
     seed: int = option(0, "seed of the generated set")
     category: list[str] | None = option(None, "generated sets: only these categories",

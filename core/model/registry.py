@@ -98,7 +98,8 @@ class OptimiseOptions:
 class ExportOptions:
     """Options of ``artgs export``."""
 
-    face_budget: int = option(5000, "most faces of a link's visual mesh")
+    face_budget: int = option(5000, "faces of a link's visual mesh (up to twice as many where "
+                              "fewer would break its watertightness)")
     voxel: float | None = option(None, "TSDF voxel size in metres (default: a link's extent / 64)")
     views: int = option(32, "rendered depth views per link for the TSDF fusion")
     density: float = option(400.0, "kg/m^3 of the closed part volumes (mass, inertia)")

@@ -38,6 +38,7 @@ from ...render.sh import C0
 
 
 TRUNC_VOXELS = 2.5      # TSDF truncation, in voxels
+FREE_ALPHA = 0.05       # a pixel this transparent shows free space; 0.05..0.5 tells nothing
 
 
 @dataclass
@@ -136,8 +137,8 @@ def decimate(part: PartMesh, max_faces: int) -> trimesh.Trimesh:
     while factor > 0.1:
         coarse = zoom(part.tsdf, factor, order=1, mode="nearest")
         voxel = part.voxel * (np.array(part.tsdf.shape) - 1) / (np.array(coarse.shape) - 1)
-        # grow the surface by half the coarser voxel so walls thinner than it stay closed
-        level = min(0.9, 0.5 * (float(voxel.max()) - part.voxel) / (TRUNC_VOXELS * part.voxel))
+        # grow the surface by half the coarser voxel (at most one fine voxel) so thin walls stay
+        level = min(1.0 / TRUNC_VOXELS, 0.5 * (float(voxel.max()) - part.voxel) / (TRUNC_VOXELS * part.voxel))
         try:
             out = _marching_cubes(coarse, part.lo, voxel, level)
         except ValueError:
@@ -167,7 +168,9 @@ def _render_depths(splat: SplatArrays, lo: np.ndarray, hi: np.ndarray, views: in
             cam = Camera(K, look_at(centre + dist * d, centre, up), resolution, resolution)
             out = render(g, cam, backend="cpu")
             depth = out.depth.numpy().astype(float)
-            depth[out.alpha.numpy() < 0.5] = 0.0
+            alpha = out.alpha.numpy()
+            depth[alpha < 0.5] = 0.0
+            depth[(alpha >= FREE_ALPHA) & (alpha < 0.5)] = -1.0     # partly covered: no evidence
             depths.append(depth)
             cams.append(cam)
     return depths, cams
@@ -178,7 +181,9 @@ def _fuse(depths: list[np.ndarray], cams: list[Camera], lo: np.ndarray, hi: np.n
     """TSDF volume (positive outside): mean truncated distance over the views that saw a voxel.
 
     A view sees a voxel when the voxel projects into it and is not behind the observed depth by
-    more than ``trunc``; a pixel with no depth means free space along its whole ray. Voxels seen
+    more than ``trunc``; a nearly transparent pixel (depth 0) means free space along its whole
+    ray; a partly covered one (depth -1, gaps between sparse Gaussians) tells nothing, so it does
+    not carve through a thin part. Voxels seen
     by no view are inside (-1).
     """
     shape = np.maximum(np.ceil((hi - lo) / voxel).astype(int) + 1, 2)
@@ -192,8 +197,8 @@ def _fuse(depths: list[np.ndarray], cams: list[Camera], lo: np.ndarray, hi: np.n
         inside = (z > 0) & (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
         d = np.zeros(len(grid))
         d[inside] = depth[row[inside], col[inside]]
-        sdf = np.where(d > 0, d - z, trunc)       # no depth on the ray: free space
-        seen = inside & (sdf > -trunc)
+        sdf = np.where(d > 0, d - z, trunc)       # nothing on the ray: free space
+        seen = inside & (sdf > -trunc) & (d >= 0)
         total[seen] += np.clip(sdf[seen] / trunc, -1.0, 1.0)
         weight[seen] += 1.0
     tsdf = np.where(weight > 0, total / np.maximum(weight, 1), -1.0)
