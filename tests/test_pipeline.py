@@ -31,7 +31,8 @@ def cabinet(tmp_path_factory) -> Path:
 def test_run_writes_every_output_and_finds_the_joints(cabinet, tmp_path):
     out = tmp_path / "out"
     res = _artgs("run", str(cabinet), "--out", str(out), "--reconstruct-iterations", "60",
-                 "--optimise-iterations", "40", "--json")
+                 "--optimise-iterations", "40", "--export-views", "12", "--check-frames", "2",
+                 "--json")
     assert res.returncode == 0, res.stderr + res.stdout
     events = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
     stages = [e["stage"] for e in events if e["event"] == "stage_done"]
