@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import bpy
@@ -63,7 +64,8 @@ class ARTGS_OT_check_engine(bpy.types.Operator):
 
 def base_python(prefs) -> interpreters.Interpreter:
     """The Python to make the engine's environment with: the preference, else one found here
-    that the engine supports (pyproject's requires-python); OSError naming what is needed."""
+    that the engine supports (pyproject's requires-python), else Blender's own Python if it is
+    one; OSError naming what is needed."""
     requires, _, _ = engine_setup.engine_requirements(preferences.ROOT)
     low, high = interpreters.parse_requires(requires)
     if prefs.setup_python:
@@ -74,6 +76,9 @@ def base_python(prefs) -> interpreters.Interpreter:
                           f"({requires}); pick another, or leave it empty to search this computer")
         return chosen
     found = interpreters.find(low, high)
+    own = interpreters.probe(sys.executable)  # Blender's bundled Python (3.11 in Blender 4.x)
+    if not found and own is not None and interpreters.matches(own.version, low, high):
+        return own
     if not found:
         raise OSError(f"no Python {requires} found (looked at {interpreters.WHERE}); install "
                       "one (python.org) or set 'Python for Set Up'")

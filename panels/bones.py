@@ -6,7 +6,7 @@ from __future__ import annotations
 import bpy
 
 from ..artgs_addon.armature import find_armature
-from .common import draw_state
+from .common import draw_figures, draw_state
 
 ICONS = {"revolute": "ORIENTATION_GIMBAL", "prismatic": "EMPTY_SINGLE_ARROW"}
 
@@ -28,6 +28,7 @@ class ARTGS_PT_bones(bpy.types.Panel):
             row.prop(settings, "proposal_method", text="")
             row.operator("artgs.propose_bones", icon="BONE_DATA")
             draw_state(layout, settings.bones)
+            draw_figures(layout, context, "propose")
         row = layout.row(align=True)
         row.operator("artgs.add_joint", icon="ADD", text="Add")
         row.operator("artgs.remove_joint", icon="REMOVE", text="Remove")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import bpy
 
+from ..artgs_addon.last_run import key_figures
 from ..artgs_addon.properties import ArtgsStageState
 
 _ICONS = {"NOT_RUN": "RADIOBUT_OFF", "RUNNING": "SORTTIME", "DONE": "CHECKMARK", "FAILED": "ERROR"}
@@ -15,6 +16,17 @@ def draw_state(layout: bpy.types.UILayout, state: ArtgsStageState) -> None:
         layout.progress(factor=state.progress, type="BAR", text=state.text)
         return
     layout.label(text=state.text, icon=_ICONS[state.status])
+
+
+def draw_figures(layout: bpy.types.UILayout, context: bpy.types.Context, stage: str) -> None:
+    """The last run's key figures of ``stage`` (a report.json stage) in the output folder."""
+    lines = key_figures(context.scene.artgs.output_path, stage)
+    if not lines:
+        return
+    col = layout.column(align=True)
+    col.scale_y = 0.8
+    for line in lines:
+        col.label(text=line)
 
 
 class ArtgsPanel:

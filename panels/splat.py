@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from .common import ArtgsPanel, draw_state
+from .common import ArtgsPanel, draw_figures, draw_state
 
 
 class ARTGS_PT_splat(ArtgsPanel, bpy.types.Panel):
@@ -19,6 +19,7 @@ class ARTGS_PT_splat(ArtgsPanel, bpy.types.Panel):
         if settings.splat_object is not None:
             col.label(text=f"Preview: {settings.splat_object.name}", icon="POINTCLOUD_DATA")
         draw_state(col, settings.splat)
+        draw_figures(col, context, "reconstruct")
 
 
 CLASSES = (ARTGS_PT_splat,)

@@ -1,18 +1,10 @@
-"""Optimise section (its engine stage does not exist in this version) and the Export section."""
+"""The Optimise and Export sections of the pipeline panel."""
 
 from __future__ import annotations
 
 import bpy
 
-from .common import ArtgsPanel, draw_state
-
-
-def _draw_unavailable(layout: bpy.types.UILayout, action: str, icon: str, state) -> None:
-    row = layout.row()
-    row.enabled = False
-    row.label(text=action, icon=icon)
-    layout.label(text="Not available in this version", icon="INFO")
-    draw_state(layout, state)
+from .common import ArtgsPanel, draw_figures, draw_state
 
 
 class ARTGS_PT_optimise(ArtgsPanel, bpy.types.Panel):
@@ -21,8 +13,10 @@ class ARTGS_PT_optimise(ArtgsPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context: bpy.types.Context) -> None:
-        _draw_unavailable(self.layout.column(), "Optimise Joints (differentiable rendering)",
-                          "MOD_HUE_SATURATION", context.scene.artgs.optimise)
+        col = self.layout.column()
+        col.operator("artgs.optimise_joints", icon="MOD_HUE_SATURATION")
+        draw_state(col, context.scene.artgs.optimise)
+        draw_figures(col, context, "optimise")
 
 
 class ARTGS_PT_export(ArtgsPanel, bpy.types.Panel):
@@ -44,6 +38,7 @@ class ARTGS_PT_export(ArtgsPanel, bpy.types.Panel):
         row = col.row(align=True)
         row.operator("artgs.import_urdf", icon="IMPORT")
         row.operator("artgs.write_edited_urdf", icon="FILE_TICK")
+        draw_figures(col, context, "check")
 
 
 CLASSES = (ARTGS_PT_optimise, ARTGS_PT_export)

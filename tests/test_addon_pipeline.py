@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from artgs.core.model.joints import read_articulation
+from engine_env import engine_python
 from engine_env import generate_capture as generate_object
 
 pytest.importorskip("bpy")
@@ -57,7 +58,7 @@ def test_headless_pipeline(tmp_path):
     driver = _DRIVER.format(script=str(ROOT / "scripts" / "headless_pipeline.py"),
                             blend=str(out / "scene.blend"), heavy=HEAVY)
     proc = subprocess.run([sys.executable, "-c", driver, str(capture), str(out),
-                           "--iterations", "10", "--preview-size", "160",
+                           "--iterations", "10", "--preview-size", "160", "--engine", engine_python(),
                            "--panels", str(out / "stages")],
                           capture_output=True, text=True, timeout=600, cwd=tmp_path)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("CHECK ")]

@@ -3,7 +3,10 @@
 Three tiny captures, one of them bad: the good ones give the same outputs as ``artgs run``, the bad
 one fails alone with its message; a second call skips what is done; a worker killed mid-way is
 run again; Ctrl-C stops with 130 and the next call finishes. Each worker runs one thread (two
-workers on two cores), which makes the reconstruction bit-reproducible, so splat bytes are compared.
+workers on two cores), as the ``artgs run`` reference does. With one thread the splat is byte-identical
+in almost every run, but not all: once in about ten runs the last bits differed (numba's fastmath
+kernels may vectorise sums differently depending on array alignment), so splats and joints are
+compared with tolerances far below any meaningful difference.
 """
 
 from __future__ import annotations
@@ -17,9 +20,11 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from artgs.core.model.joints import read_articulation
+from artgs.core.model.ply import read_ply
 from artgs.core.synth.generate import generate_object
 
 ITERATIONS = "15"
@@ -83,11 +88,18 @@ def _summary(out: Path) -> dict[str, dict]:
 
 def _same_outputs(got: Path, ref: Path) -> None:
     assert {p.name for p in got.iterdir()} == {p.name for p in ref.iterdir()} >= set(OUTPUTS)
-    # the reconstruction is bit-reproducible with one thread (see the module docstring)
-    assert (got / "splat.ply").read_bytes() == (ref / "splat.ply").read_bytes()
+    # one thread: the splat is nearly always byte-identical, but not always (module docstring)
+    a, b = read_ply(got / "splat.ply"), read_ply(ref / "splat.ply")
+    for field in ("means", "quats", "log_scales", "opacity_logits", "sh"):
+        np.testing.assert_allclose(getattr(a, field), getattr(b, field), rtol=1e-3, atol=1e-4)
     for name in ("proposals.json", "articulation.json"):
-        a, b = read_articulation(got / name), read_articulation(ref / name)
-        assert [j.to_dict() for j in a.joints] == [j.to_dict() for j in b.joints]
+        ja, jb = read_articulation(got / name).joints, read_articulation(ref / name).joints
+        assert [(j.name, j.type, j.parent, j.child) for j in ja] == \
+            [(j.name, j.type, j.parent, j.child) for j in jb]
+        for x, y in zip(ja, jb):
+            np.testing.assert_allclose(x.axis, y.axis, atol=1e-3)
+            np.testing.assert_allclose(x.origin, y.origin, atol=1e-3)
+            np.testing.assert_allclose(x.limit, y.limit, atol=1e-3)
     report = json.loads((got / "report.json").read_text())
     ref_report = json.loads((ref / "report.json").read_text())
     assert set(report["stages"]) == set(ref_report["stages"])

@@ -125,3 +125,28 @@ def test_zip_carries_what_the_engine_is_built_from(wheel_folder):
     names = set(zipfile.ZipFile(wheel_folder[0]).namelist())
     assert {"pyproject.toml", "README.md", "core/__init__.py", "core/model/__init__.py",
             "core/model/interpreters.py", "artgs_addon/engine_setup.py"} <= names
+
+
+def test_set_up_plan_cpu_cuda_and_wheel_folder(tmp_path):
+    from artgs.artgs_addon import engine_setup
+
+    python = str(tmp_path / "engine-venv" / "bin" / "python")
+    cpu = engine_setup.plan(tmp_path, "/usr/bin/python3.11", ROOT)
+    assert [argv[:3] for _, argv in cpu.steps] == [
+        ("/usr/bin/python3.11", "-m", "venv"), (python, "-m", "pip"), (python, "-m", "pip")]
+    torch_step = cpu.steps[1][1]
+    assert "torch==2.13.0" in torch_step and torch_step[-2:] == (
+        "--index-url", engine_setup.TORCH_INDEX["cpu"])
+    assert cpu.steps[2][1][-1] == str(tmp_path / "engine-source")  # built from the copy
+    cuda = engine_setup.plan(tmp_path, "/usr/bin/python3.11", ROOT, torch="cuda")
+    assert cuda.steps[1][1][-1] == engine_setup.TORCH_INDEX["cuda"] != torch_step[-1]
+    # by hand: one command line, the engine built from the extension folder itself
+    line = cpu.command_line(ROOT)
+    assert line.count(" && ") == 2 and line.endswith(str(ROOT)) and "engine-source" not in line
+    offline = engine_setup.plan(tmp_path, "/usr/bin/python3.11", ROOT, find_links=tmp_path / "w")
+    for _, argv in offline.steps[1:]:
+        assert argv[argv.index("--find-links") + 1] == str(tmp_path / "w") and "--no-index" in argv
+        assert "--index-url" not in argv
+    assert offline.steps[-1][1][-1] == "artgs==0.1.0" and offline.source is None
+    with pytest.raises(ValueError, match="torch must be one of"):
+        engine_setup.plan(tmp_path, "/usr/bin/python3.11", ROOT, torch="rocm")

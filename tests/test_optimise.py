@@ -218,3 +218,19 @@ def test_spurious_part_removed(cabinet, tmp_path):
     assert set(names) == {j.name for j in gt.joints}
     labels = np.load(out / layout.PART_LABELS)
     assert labels.max() == 2
+
+
+def test_missed_part_added(cabinet, tmp_path):
+    """Only the drawer is proposed; the door the frames show opening becomes a new hinge."""
+    gt = read_articulation(cabinet / "gt.json")
+    door = next(j for j in gt.joints if j.type == "revolute")
+    out = _out(tmp_path, cabinet, [j for j in gt.joints if j.type == "prismatic"])
+    figures = optimise(out, load_capture(cabinet), QUIET,
+                       OptimiseOptions(iterations=80, types=False, parts=True))
+    art = read_articulation(out / layout.ARTICULATION)
+    assert len(figures["added"]) == 1 and len(art.joints) == 2, figures
+    new = next(j for j in art.joints if j.name == figures["added"][0])
+    assert new.source == "optimise" and new.type == "revolute"
+    s = match_joints([new], [door])[0]
+    assert s.axis_error_deg < 5.0 and s.origin_error_cm < 5.0, s
+    assert abs(max(new.states.values()) - door.limit[1]) < 0.2

@@ -16,10 +16,10 @@ import signal
 from collections import deque
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
-from typing import Callable
+from typing import Any, Callable
 
 from .jobs import Job
-from .worker import Outcome, Settings, limit_threads_env, run_job
+from .worker import Outcome, limit_threads_env, run_job
 
 STOP_GRACE = 30.0   # seconds a cancelled worker gets to stop before it is killed
 
@@ -32,13 +32,13 @@ def core_shares(workers: int, cores: list[int] | None = None) -> list[list[int]]
     return [[cores[i % len(cores)]] for i in range(workers)]
 
 
-def _child(job: Job, settings: Settings, cores: list[int], conn: Connection) -> None:
+def _child(job: Job, stage_options: dict[str, Any], cores: list[int], conn: Connection) -> None:
     """Worker process body: pin, limit threads, run, send the outcome."""
     signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
         os.sched_setaffinity(0, cores)
         limit_threads_env(len(cores))
-        outcome = run_job(job, settings, len(cores))
+        outcome = run_job(job, stage_options, len(cores))
     except KeyboardInterrupt:   # stopped before run_job could catch it
         outcome = Outcome("cancelled", "cancelled", pid=os.getpid())
     # a second Ctrl-C (the terminal's SIGINT, then the driver's SIGTERM) must not lose the outcome
@@ -61,7 +61,7 @@ class _Running:
     starts: int
 
 
-def run_local(jobs: list[Job], settings: Settings, workers: int, retries: int,
+def run_local(jobs: list[Job], stage_options: dict[str, Any], workers: int, retries: int,
               started: Callable[[Job, int], None], ended: Callable[[Job, Outcome], None],
               retrying: Callable[[Job, str], None]) -> None:
     """Run ``jobs`` on ``workers`` processes; callbacks report starts (job, pid), outcomes, retries."""
@@ -76,7 +76,7 @@ def run_local(jobs: list[Job], settings: Settings, workers: int, retries: int,
                 job, starts = queue.popleft()
                 slot = free.pop(0)
                 recv, send = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_child, args=(job, settings, shares[slot], send),
+                proc = ctx.Process(target=_child, args=(job, stage_options, shares[slot], send),
                                    name=f"artgs-batch-{job.name}", daemon=True)
                 proc.start()
                 send.close()

@@ -19,7 +19,7 @@ from typing import Any, Callable
 
 from ..model.errors import ArtgsError
 from .jobs import Job
-from .worker import Outcome, Settings, run_job
+from .worker import Outcome, run_job
 
 CANCEL_GRACE = 30.0   # seconds cancelled tasks get to stop before their workers are killed
 
@@ -33,15 +33,15 @@ def _ray() -> Any:
     return ray
 
 
-def _task(job: Job, settings: Settings) -> Outcome:
+def _task(job: Job, stage_options: dict[str, Any]) -> Outcome:
     """The Ray task: threads from the CPUs Ray gave it (Ray also sets OMP_NUM_THREADS)."""
     import ray
 
     cpus = ray.get_runtime_context().get_assigned_resources().get("CPU", 1.0)
-    return run_job(job, settings, max(1, int(cpus)))
+    return run_job(job, stage_options, max(1, int(cpus)))
 
 
-def run_ray(jobs: list[Job], settings: Settings, address: str | None, workers: int,
+def run_ray(jobs: list[Job], stage_options: dict[str, Any], address: str | None, workers: int,
             cpus: int, gpus: float, retries: int,
             started: Callable[[Job, int], None], ended: Callable[[Job, Outcome], None],
             retrying: Callable[[Job, str], None]) -> None:  # noqa: ARG001 - Ray retries itself
@@ -66,7 +66,7 @@ def run_ray(jobs: list[Job], settings: Settings, address: str | None, workers: i
     waiting = set()     # submitted, not yet started (a task starts by writing its log)
     try:
         for job in jobs:
-            pending[remote.remote(job, settings)] = job
+            pending[remote.remote(job, stage_options)] = job
             waiting.add(job)
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)

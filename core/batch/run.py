@@ -25,7 +25,7 @@ from ..model.progress import Progress
 from . import summary
 from .bar import BatchBar
 from .jobs import Job, plan
-from .worker import Outcome, Settings
+from .worker import Outcome
 
 
 @dataclass
@@ -105,7 +105,7 @@ def _run_batch(jobs: list[Job], out_dir: Path, stage_options: dict[str, Any],
     cancelled = False
     try:
         if todo:
-            _run(todo, Settings(stage_options), options, workers, bar, ended)
+            _run(todo, stage_options, options, workers, bar, ended)
     except KeyboardInterrupt:
         cancelled = True
     interrupted = set(bar.running) if cancelled else set()
@@ -132,17 +132,17 @@ def _run_batch(jobs: list[Job], out_dir: Path, stage_options: dict[str, Any],
     return BatchResult(rows, total)
 
 
-def _run(jobs: list[Job], settings: Settings, options: BatchOptions, workers: int,
+def _run(jobs: list[Job], stage_options: dict[str, Any], options: BatchOptions, workers: int,
          bar: BatchBar, ended) -> None:
     if options.ray:
         from .ray_pool import run_ray
 
         gpus = options.gpus
         if gpus is None:
-            gpus = float(any(getattr(o, "device", None) == "cuda" for o in settings.options.values()))
-        run_ray(jobs, settings, options.address, workers, max(1, options.cpus), gpus,
+            gpus = float(any(getattr(o, "device", None) == "cuda" for o in stage_options.values()))
+        run_ray(jobs, stage_options, options.address, workers, max(1, options.cpus), gpus,
                 options.retries, bar.started, ended, bar.retrying)
     else:
         from .local import run_local
 
-        run_local(jobs, settings, workers, options.retries, bar.started, ended, bar.retrying)
+        run_local(jobs, stage_options, workers, options.retries, bar.started, ended, bar.retrying)

@@ -13,7 +13,7 @@ import sys
 import time
 import traceback
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, TextIO
 
@@ -23,13 +23,6 @@ from .jobs import Job
 
 ATTEMPT_MARK = "=== artgs batch attempt"
 THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
-
-
-@dataclass(frozen=True)
-class Settings:
-    """What every capture of a batch runs with."""
-
-    options: dict[str, Any] = field(default_factory=dict)   # stage name -> its options dataclass
 
 
 @dataclass
@@ -92,8 +85,11 @@ def _attempt_number(log: Path) -> int:
         return 0
 
 
-def run_job(job: Job, settings: Settings, threads: int) -> Outcome:
-    """Run the pipeline on ``job`` with ``threads`` threads; the outcome, never an exception."""
+def run_job(job: Job, stage_options: dict[str, Any], threads: int) -> Outcome:
+    """Run the pipeline on ``job`` with ``threads`` threads; the outcome, never an exception.
+
+    ``stage_options``: per stage name, its options dataclass (as :func:`core.pipeline.run`).
+    """
     from .. import pipeline
 
     attempt = _attempt_number(job.log) + 1
@@ -107,7 +103,7 @@ def run_job(job: Job, settings: Settings, threads: int) -> Outcome:
         try:
             limit_threads(threads)
             progress = Progress("text", stream=stream, min_interval=5.0)
-            pipeline.run(job.capture, job.out, progress, settings.options, resume=job.resume)
+            pipeline.run(job.capture, job.out, progress, stage_options, resume=job.resume)
         except (KeyboardInterrupt, Cancelled):
             outcome.status, outcome.message = "cancelled", "cancelled"
         except InputError as exc:

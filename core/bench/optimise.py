@@ -40,7 +40,8 @@ def _scores(pred, gt) -> list[dict]:
 
 
 def perturbed(joints, rng: np.random.Generator) -> list:
-    """Copies of ``joints`` with the axis turned by 10–30° and the line moved by 5–15 cm."""
+    """Copies of ``joints`` with the axis turned by 10–30° and the line moved by 5–15 cm (their
+    states, the true ones, are kept)."""
     out = []
     for j in joints:
         j = copy.deepcopy(j)
@@ -138,8 +139,8 @@ def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
         progress.finished(before=json.dumps(before), after=json.dumps(after), basin_rate=rate,
                           basin_joints=n, results=json.dumps(results))
     else:
-        print(f"set {bset.label}, {len(captures)} captures, splat iterations {args.iterations}, optimisation "
-              f"iterations {args.opt_iterations}")
+        print(f"set {bset.label}, {len(captures)} captures, splat iterations {args.iterations}, "
+              f"optimisation iterations {args.opt_iterations}")
         print(format_table(before, after))
         if n:
             print(f"basin: {100 * rate:.0f} % of {n} joints from perturbed starts (10-30 deg, "

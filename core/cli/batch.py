@@ -14,6 +14,17 @@ NAME = "batch"
 HELP = "the whole pipeline on many captures: a local process pool, or Ray with --ray"
 
 
+def _at_least(low: float, kind: type = int):
+    """An argparse type: a number of ``kind`` not below ``low`` (argparse exits 2 otherwise)."""
+    def parse(text: str):
+        value = kind(text)
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be at least {low}, not {text}")
+        return value
+    parse.__name__ = kind.__name__
+    return parse
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Captures, DIR, the pool, and every stage's options (as ``artgs run``)."""
     p.add_argument("captures", nargs="*", metavar="CAPTURE", help="capture folders")
@@ -21,17 +32,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder: DIR/<capture name>/ per capture, logs and the summary")
     cpus = len(os.sched_getaffinity(0))
-    p.add_argument("--workers", type=int, default=1, metavar="N",
+    p.add_argument("--workers", type=_at_least(1), default=1, metavar="N",
                    help=f"captures at once (local: each on 1/N of this machine's {cpus} cores)")
     p.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
                    help="run captures as Ray tasks: on the Ray cluster at ADDRESS, or without "
                         "ADDRESS on a private Ray started on 127.0.0.1 (needs artgs[batch])")
-    p.add_argument("--cpus-per-capture", type=int, default=1, metavar="C",
+    p.add_argument("--cpus-per-capture", type=_at_least(1), default=1, metavar="C",
                    help="--ray: CPUs each capture's task asks for")
-    p.add_argument("--gpus-per-capture", type=float, default=None, metavar="G",
+    p.add_argument("--gpus-per-capture", type=_at_least(0, float), default=None, metavar="G",
                    help="--ray: GPUs each capture's task asks for (default: 1 with --device "
                         "cuda, else 0)")
-    p.add_argument("--retries", type=int, default=2,
+    p.add_argument("--retries", type=_at_least(0), default=2,
                    help="restarts of a capture whose worker process died (killed, out of memory)")
     p.add_argument("--force", action="store_true",
                    help="re-run captures and stages that are already done")
@@ -42,15 +53,10 @@ def run(args: argparse.Namespace, progress: Progress) -> int:
     """Run the batch; exit 0 when every capture is ok (or was done), 1 when any failed."""
     from ..batch.jobs import read_list
     from ..batch.run import BatchOptions, run_batch
-    from ..model.errors import InputError
 
     captures: list[str | Path] = list(args.captures)
     if args.list:
         captures += read_list(args.list)
-    if args.workers < 1 or args.retries < 0 or args.cpus_per_capture < 1 or \
-            (args.gpus_per_capture or 0.0) < 0:
-        raise InputError("command line", "--workers and --cpus-per-capture must be at least 1, "
-                         "--retries and --gpus-per-capture at least 0")
     options = BatchOptions(workers=args.workers, ray=args.ray is not None,
                            address=args.ray or None, retries=args.retries,
                            cpus=args.cpus_per_capture, gpus=args.gpus_per_capture,

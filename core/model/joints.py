@@ -3,7 +3,7 @@
 Numpy only: the Blender process reads and writes these files too.
 
 Per joint, beyond the spec's ``name type axis origin limit parent child states``, proposals carry:
-``source`` (``vlm``, ``motion`` or ``user``), ``confidence`` (0..1), ``bbox`` ([x1, y1, x2, y2] pixels
+``source`` (``vlm``, ``motion``, ``user``, or ``optimise`` for a part only the optimisation found), ``confidence`` (0..1), ``bbox`` ([x1, y1, x2, y2] pixels
 in the view named by the file's ``view``), ``handle`` ({"point": xyz, "approach": unit xyz}) and
 ``extent`` (the moving part's oriented box in the closed state: {"center": xyz, "axes": 3 unit row
 vectors, "half_size": xyz}). Unknown keys are kept on read and written back unchanged.
@@ -23,7 +23,7 @@ from .errors import InputError
 from .jsonio import read_json_object
 
 JOINT_TYPES = ("revolute", "prismatic")
-SOURCES = ("vlm", "motion", "user")
+SOURCES = ("vlm", "motion", "user", "optimise")   # optimise: a part the optimisation found
 _SPEC_KEYS = {"name", "type", "axis", "origin", "limit", "parent", "child", "states"}
 _PROPOSAL_KEYS = {"source", "confidence", "bbox", "handle", "extent"}
 

@@ -86,8 +86,8 @@ class OptimiseOptions:
     iterations: int = option(300, "steps of the main fit (the later phases take fractions of it)")
     types: bool = option(True, "choose each joint's type by fitting both hypotheses (--no-types: "
                          "keep the proposals' types)")
-    parts: bool = option(True, "remove parts the frames do not show moving (--no-parts: keep "
-                         "every proposed part)")
+    parts: bool = option(True, "remove parts the frames do not show moving and add parts they "
+                         "show moving that no joint explains (--no-parts: the proposed parts)")
     seed: int = option(0, "random seed of the frame sampling")
     device: str = _device()
     max_side: int = _max_side()

@@ -17,7 +17,8 @@ Libraries, compared on this job:
 - simplification: ``fast-simplification`` (quadric edge collapse, a face budget, ~50 ms for 100 k
   faces) rather than trimesh's ``simplify_quadric_decimation`` (which calls it anyway in trimesh 4+)
   or open3d (a 100 MB dependency for one function). Where decimation pinches thin walls into
-  non-manifold edges, marching cubes on a coarser resampling of the TSDF replaces it.
+  non-manifold edges, marching cubes on a coarser resampling of the TSDF replaces it when that
+  keeps the volume; else the budget wins over watertightness (reported per link).
 """
 
 from __future__ import annotations
@@ -34,6 +35,9 @@ from ...model.ply import SplatArrays
 from ...render.gaussians import Gaussians
 from ...render.rasterize import render
 from ...render.sh import C0
+
+
+TRUNC_VOXELS = 2.5      # TSDF truncation, in voxels
 
 
 @dataclass
@@ -81,7 +85,7 @@ def part_mesh(splat: SplatArrays, voxel: float | None = None, views: int = 32,
     voxel = float(voxel) if voxel else max(extent / max_voxels, 1e-3)
     lo, hi = lo - 3 * voxel, hi + 3 * voxel
     depths, cams = _render_depths(splat, lo, hi, views, resolution)
-    tsdf = _fuse(depths, cams, lo, hi, voxel, trunc=2.5 * voxel)
+    tsdf = _fuse(depths, cams, lo, hi, voxel, trunc=TRUNC_VOXELS * voxel)
     mesh = _marching_cubes(tsdf, lo, voxel)
     tree = cKDTree(pts)
     dist, _ = tree.query(mesh.vertices)
@@ -104,11 +108,12 @@ def colour_vertices(mesh: trimesh.Trimesh, splat: SplatArrays, k: int = 4) -> No
 
 
 def decimate(part: PartMesh, max_faces: int) -> trimesh.Trimesh:
-    """The part's surface in at most ~``max_faces`` faces, still watertight (world frame).
+    """The part's surface in about ``max_faces`` faces (world frame), watertight when possible.
 
-    Quadric decimation first; where it leaves non-manifold edges (thin walls pinched together),
-    marching cubes on a coarser resampling of the same TSDF, closed by construction; the full
-    surface if neither keeps the volume.
+    Quadric decimation to the budget (and up to twice it); where it leaves non-manifold edges
+    (thin walls pinched together), marching cubes on a coarser resampling of the same TSDF, closed
+    by construction, if it keeps at least half the volume; else the decimated surface as it is
+    (the export reports each visual mesh's watertightness; mass comes from the full surface).
     """
     import fast_simplification
     from scipy.ndimage import zoom
@@ -116,18 +121,25 @@ def decimate(part: PartMesh, max_faces: int) -> trimesh.Trimesh:
     mesh = part.mesh
     if len(mesh.faces) <= max_faces:
         return mesh
-    v, f = fast_simplification.simplify(np.asarray(mesh.vertices, np.float64),
-                                        np.asarray(mesh.faces, np.int64),
-                                        1.0 - max_faces / len(mesh.faces))
-    out = trimesh.Trimesh(v, f, process=True)
-    if out.is_watertight and out.volume > 0.5 * mesh.volume:
-        return out
+    first = None
+    for budget in (max_faces, int(1.5 * max_faces), 2 * max_faces):
+        if budget >= len(mesh.faces):
+            break
+        v, f = fast_simplification.simplify(np.asarray(mesh.vertices, np.float64),
+                                            np.asarray(mesh.faces, np.int64),
+                                            1.0 - budget / len(mesh.faces))
+        out = trimesh.Trimesh(v, f, process=True)
+        first = first if first is not None else out
+        if out.is_watertight and out.volume > 0.5 * mesh.volume:
+            return out
     factor = np.sqrt(max_faces / len(mesh.faces))
     while factor > 0.1:
         coarse = zoom(part.tsdf, factor, order=1, mode="nearest")
         voxel = part.voxel * (np.array(part.tsdf.shape) - 1) / (np.array(coarse.shape) - 1)
+        # grow the surface by half the coarser voxel so walls thinner than it stay closed
+        level = min(0.9, 0.5 * (float(voxel.max()) - part.voxel) / (TRUNC_VOXELS * part.voxel))
         try:
-            out = _marching_cubes(coarse, part.lo, voxel)
+            out = _marching_cubes(coarse, part.lo, voxel, level)
         except ValueError:
             break
         if out.volume < 0.5 * mesh.volume:
@@ -135,7 +147,7 @@ def decimate(part: PartMesh, max_faces: int) -> trimesh.Trimesh:
         if len(out.faces) <= max_faces:
             return out
         factor *= 0.8
-    return mesh
+    return first if first is not None else mesh
 
 
 def _render_depths(splat: SplatArrays, lo: np.ndarray, hi: np.ndarray, views: int,
@@ -188,13 +200,14 @@ def _fuse(depths: list[np.ndarray], cams: list[Camera], lo: np.ndarray, hi: np.n
     return tsdf.reshape(shape)
 
 
-def _marching_cubes(tsdf: np.ndarray, lo: np.ndarray, voxel) -> trimesh.Trimesh:
-    """Closed surface of ``tsdf < 0`` (padded with one outside layer), outward normals."""
+def _marching_cubes(tsdf: np.ndarray, lo: np.ndarray, voxel, level: float = 0.0
+                    ) -> trimesh.Trimesh:
+    """Closed surface of ``tsdf < level`` (padded with one outside layer), outward normals."""
     from skimage.measure import marching_cubes
 
     padded = np.pad(tsdf, 1, constant_values=1.0)
     spacing = np.broadcast_to(np.asarray(voxel, float), (3,))
-    verts, faces, _, _ = marching_cubes(padded, level=0.0, spacing=tuple(spacing))
+    verts, faces, _, _ = marching_cubes(padded, level=level, spacing=tuple(spacing))
     verts = verts - spacing + lo
     mesh = trimesh.Trimesh(verts, faces, process=True)
     parts = mesh.split(only_watertight=True)

@@ -307,3 +307,98 @@ def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
         else:
             _restore(model, fitted)
     return kept
+
+
+@torch.no_grad()
+def contradicted(model: ArticulatedSplat, frames, cfg) -> np.ndarray:
+    """Base Gaussians the frames contradict at two or more consecutive times: visible in the
+    render of the fitted model, yet the frame measures a surface clearly behind them or sees
+    background there (something that was there has moved away). Bool (N,)."""
+    means = model.splat.means
+    base = torch.as_tensor(model.labels() == 0, device=means.device)
+    unit = 0.01 * model.size
+    hits = torch.zeros(len(frames.times), model.splat.n, dtype=torch.bool, device=means.device)
+    for i, ti in enumerate(frames.time_index):
+        if frames.times[ti] == 0:
+            continue
+        v = frames.levels[0][i]
+        r = model.render(v, ti, cfg.backend)
+        cam = means @ v.w2c[:3, :3].T + v.w2c[:3, 3]
+        z = cam[:, 2]
+        uv = cam[:, :2] / z.clamp_min(1e-6)[:, None] * v.K[[0, 1], [0, 1]] + v.K[:2, 2]
+        px, py = uv[:, 0].floor().long(), uv[:, 1].floor().long()
+        inside = (z > 0) & (px >= 0) & (py >= 0) & (px < v.width) & (py < v.height)
+        px, py = px.clamp(0, v.width - 1), py.clamp(0, v.height - 1)
+        seen = inside & ((r.depth[py, px] - z).abs() < cfg.sigma_depth * unit)
+        behind = v.depth_valid[py, px] & (v.depth[py, px] - z > 3 * cfg.sigma_depth * unit)
+        empty = v.mask[py, px] < 0.5
+        hits[ti] |= base & seen & (behind | empty)
+    return (hits[1:] & hits[:-1]).any(0).cpu().numpy()
+
+
+def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
+    """Connected groups of ``points`` (neighbours closer than 3 median neighbour distances),
+    largest first, each of at least ``min_size`` points; index arrays."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+    if len(points) < min_size:
+        return []
+    tree = cKDTree(points)
+    d = tree.query(points, 2)[0][:, 1]
+    pairs = tree.query_pairs(3 * float(np.median(d)), output_type="ndarray")
+    n = len(points)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    groups = [np.flatnonzero(comp == c) for c in np.unique(comp)]
+    return sorted([g for g in groups if len(g) >= min_size], key=len, reverse=True)
+
+
+def add_missed(run, share: float, tries: int = 2) -> list[str]:
+    """Missed parts: Gaussians of the base the frames contradict over consecutive times, grouped
+    into connected clusters (the ``tries`` largest with at least 1 % of the Gaussians), each
+    becomes a part hypothesis: hinges at its box edges and slides along its normal and box axes
+    are scored by rendering at its key time, the best is fitted, and the part is kept only if it
+    lowers the image loss over all frames. Returns the names of the added joints."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    flagged = np.flatnonzero(contradicted(model, frames, cfg))
+    means = model.splat.means.cpu().numpy().astype(float)
+    groups = clusters(means[flagged], max(10, model.splat.n // 100))[:tries]
+    added = []
+    steps = max(run.options.iterations // 2, 1)
+    for g in groups:
+        members = np.zeros(model.splat.n, bool)
+        members[flagged[g]] = True
+        before = float(evaluate(model, frames, cfg).mean())
+        kept = _snapshot(model)
+        name = f"part_{len(model.names) + 1}"
+        while name in model.names:
+            name += "_"
+        k = model.add(name, REVOLUTE, np.array([0.0, 0.0, 1.0]), means[members].mean(0), members)
+        run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
+        pts = part_points(model, k)
+        hyps = [(REVOLUTE, a, p) for a, p in box_edges(pts)]
+        hyps += [(PRISMATIC, d, pts.mean(0)) for d in
+                 [part_normal(model, k)] + list(np.linalg.svd(pts - pts.mean(0))[2])]
+        key = key_time(model, frames, cfg, k)
+        scored = []
+        for kind, axis, point in hyps:
+            model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+            scored.append((score_at(model, frames, cfg, k, key, state_candidates(model, k))[0],
+                           kind, axis, point))
+            run.progress.check_cancel()
+        _, kind, axis, point = min(scored, key=lambda s: s[0])
+        model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+        search_states(model, frames, k, cfg, state_candidates(model, k))
+        run.run_fit(steps, f"new part {name}", share / max(len(groups), 1),
+                    free=[i == k for i in range(model.k)], coarse=cfg.coarse)
+        after = float(evaluate(model, frames, cfg).mean())
+        run.progress.log(f"{name}: {len(g)} Gaussians the frames contradict; as a {kind} part "
+                         f"the image loss is {after:.5f} (without {before:.5f})")
+        if after < before * (1 - REMOVE_TOL):
+            added.append(name)
+        else:
+            model.drop(k)
+            run.trust = run.trust[:-1]
+            _restore(model, kept)
+    return added

@@ -213,3 +213,30 @@ class ArticulatedSplat:
                 h[self.hard > k + 1] -= 1
                 self.hard = h
         del self.names[k], self.types[k]
+
+    def add(self, name: str, kind: str, axis: np.ndarray, origin: np.ndarray,
+            members: np.ndarray) -> int:
+        """Append a joint whose part is the Gaussians ``members`` (bool, N); returns its index.
+        Only for hardened models (the new part is a hard assignment)."""
+        assert self.hard is not None
+        dev = self.axes.device
+        f = dict(dtype=torch.float32, device=dev)
+        row = lambda v: torch.as_tensor(np.asarray(v, float), **f).reshape(1, 3)  # noqa: E731
+        with torch.no_grad():
+            self.axes = torch.cat([self.axes.detach(), row(axis)])
+            self.origins = torch.cat([self.origins.detach(), row(origin)])
+            self.axes0 = torch.cat([self.axes0, row(axis)])
+            self.origins0 = torch.cat([self.origins0, row(origin)])
+            self.states = torch.cat([self.states.detach(), torch.zeros(1, len(self.times), **f)])
+            self.locked = torch.cat([self.locked, torch.zeros(1, dtype=torch.bool, device=dev)])
+            logits = torch.zeros(self.splat.n, 1, **f)
+            self.logits = torch.cat([self.logits.detach(), logits], 1)
+            m = torch.as_tensor(members, device=dev)
+            self.logits[m] = 0.0
+            self.logits[m, -1] = HARD_LOGIT
+            h = self.hard.clone()
+            h[m] = self.k + 1
+            self.hard = h
+        self.names.append(name)
+        self.types.append(kind)
+        return self.k - 1

@@ -1,0 +1,89 @@
+"""The last run's key figures of each stage, from the output folder's report.json (and the joints
+file), as short lines for the stage panels.
+
+The panels redraw often: files are read again only when they changed (modification time).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+from ..core.model import layout
+from ..core.model.errors import InputError
+from ..core.model.joints import read_articulation
+
+_CACHE: dict[Path, tuple[float, Any]] = {}
+
+
+def _cached(path: Path, read: Callable[[Path], Any]) -> Any:
+    """``read(path)``, reused while the file's modification time is the same; None if missing or
+    unreadable."""
+    try:
+        mtime = path.stat().st_mtime
+    except OSError:
+        _CACHE.pop(path, None)
+        return None
+    hit = _CACHE.get(path)
+    if hit is not None and hit[0] == mtime:
+        return hit[1]
+    try:
+        value = read(path)
+    except (InputError, OSError, ValueError):
+        value = None
+    _CACHE[path] = (mtime, value)
+    return value
+
+
+def _number(value: Any, fmt: str) -> str | None:
+    return fmt.format(value) if isinstance(value, (int, float)) and not isinstance(value, bool) \
+        else None
+
+
+def _reconstruct(entry: dict, out: Path) -> list[str]:
+    return [s for s in (_number(entry.get("gaussians"), "{:,} Gaussians"),
+                        _number(entry.get("holdout_psnr"), "held-out PSNR {:.2f} dB")
+                        if "holdout_psnr" in entry else "no held-out views (PSNR not measured)")
+            if s]
+
+
+def _propose(entry: dict, out: Path) -> list[str]:
+    lines = [s for s in (_number(entry.get("joints"), "{} joints"),) if s]
+    articulation = _cached(out / layout.PROPOSALS, read_articulation)
+    if articulation is not None:
+        for joint in articulation.joints:
+            confidence = "" if joint.confidence is None else f", confidence {joint.confidence:.2f}"
+            lines.append(f"{joint.name}: {joint.type}{confidence}")
+    return lines
+
+
+def _optimise(entry: dict, out: Path) -> list[str]:
+    keys = [k for k in entry if "residual" in k]
+    return [f"{k.replace('_', ' ')} {entry[k]:.4g}" for k in keys
+            if isinstance(entry[k], (int, float))]
+
+
+def _check(entry: dict, out: Path) -> list[str]:
+    keys = [k for k in entry if "success" in k]
+    return [f"{k.replace('_', ' ')}: {entry[k]}" for k in keys]
+
+
+#: report.json stage -> what its panel shows.
+FIGURES: dict[str, Callable[[dict, Path], list[str]]] = {
+    "reconstruct": _reconstruct, "propose": _propose, "optimise": _optimise, "check": _check}
+
+
+def key_figures(out: Path | None, stage: str) -> list[str]:
+    """Lines for the panel of ``stage`` (a report.json stage name); empty when it has not run."""
+    if out is None:
+        return []
+    report = _cached(Path(out) / layout.REPORT, lambda path: layout.read_report(path.parent)) or {}
+    entry = report.get("stages", {}).get(stage)
+    if not isinstance(entry, dict):
+        return []
+    lines = FIGURES[stage](entry, Path(out))
+    seconds = _number(entry.get("seconds"), "{:.0f} s")
+    finished = entry.get("finished", "")
+    when = " ".join(s for s in (f"last run {finished[:16].replace('T', ' ')}" if finished else "",
+                                f"({seconds})" if seconds else "") if s)
+    return [when, *lines] if when else lines
