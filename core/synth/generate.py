@@ -374,10 +374,19 @@ def _write_capture(root: Path, spec: Subject, width: int, height: int, static_vi
     if isinstance(spec, AssetSpec):
         meta["asset"] = str(spec.path)
         meta["scale"] = spec.scale
+    write_articulation(root / "gt.json", ground_truth(spec, schedule, meta))
+
+
+def ground_truth(spec: Subject, schedule: list[dict[str, float]],
+                 meta: dict[str, Any] | None = None) -> Articulation:
+    """The subject's world-frame joints with their ``states`` per time of ``schedule``, ``extent``
+    and ``handle``; ``meta`` defaults to the category and seed."""
+    joints = spec.joints()
     for joint in joints:
         joint.states = {t: s[joint.name] for t, s in enumerate(schedule)}
     spec.annotate(joints)
-    write_articulation(root / "gt.json", Articulation(joints, meta))
+    return Articulation(joints, meta if meta is not None else
+                        {"category": spec.category, "seed": spec.seed})
 
 
 def _load_subject(scene: Scene, spec: Subject, urdf_path: Path):
