@@ -41,30 +41,8 @@ class BenchReconstructOptions:
 
 
 @dataclass
-class BenchProposeOptions:
-    """``artgs bench-propose``: proposal accuracy per category (motion route)."""
-
-    set: str | None = option(None, SET_HELP)
-    data: str | None = option(None, "capture folders already made (= --set data:DIR)")
-    per_category: int = option(2, "objects per category (generated sets)")
-    seed: int = option(0, "seed of the generated set")
-    depth_noise: float = option(0.0, "generated sets: depth noise std-dev, metres")
-    simultaneous: bool = option(False, "generated sets: the first two joints also move together")
-    category: list[str] | None = option(None, "generated sets: only these categories",
-                                        choices=CATEGORIES + EXTRA_KINDS)
-    width: int = option(160, "generated sets: image width")
-    height: int = option(120, "generated sets: image height")
-    iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
-                             "depth-initialised splat)")
-    robot: str | None = option(None, "generated sets: also the same objects opened by this robot "
-                               "in view, scored with its twin and without (ablation)",
-                               choices=tuple(ROBOTS))
-    device: str = option("auto", "where torch work runs", choices=DEVICES)
-
-
-@dataclass
-class BenchOptimiseOptions:
-    """``artgs bench-optimise``: joint accuracy without and with the optimisation; basin rate."""
+class SetOptions:
+    """What the accuracy benchmarks share: the set, the generated set's shape, the splat."""
 
     set: str | None = option(None, SET_HELP)
     data: str | None = option(None, "capture folders already made (= --set data:DIR)")
@@ -76,10 +54,28 @@ class BenchOptimiseOptions:
     height: int = option(120, "generated sets: image height")
     iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
                              "depth-initialised splat)")
+    device: str = option("auto", "where torch work runs", choices=DEVICES)
+
+
+@dataclass
+class BenchProposeOptions(SetOptions):
+    """``artgs bench-propose``: proposal accuracy per category (motion route)."""
+
+    per_category: int = option(2, "objects per category (generated sets)")
+    depth_noise: float = option(0.0, "generated sets: depth noise std-dev, metres")
+    simultaneous: bool = option(False, "generated sets: the first two joints also move together")
+    robot: str | None = option(None, "generated sets: also the same objects opened by this robot "
+                               "in view, scored with its twin and without (ablation)",
+                               choices=tuple(ROBOTS))
+
+
+@dataclass
+class BenchOptimiseOptions(SetOptions):
+    """``artgs bench-optimise``: joint accuracy without and with the optimisation; basin rate."""
+
     opt_iterations: int = option(300, "steps of the main articulation fit")
     basin: int = option(0, "perturbed-start runs per capture (10-30 deg, 5-15 cm) for the basin "
                         "rate")
-    device: str = option("auto", "where torch work runs", choices=DEVICES)
 
 
 @dataclass
@@ -100,18 +96,10 @@ class BenchBatchOptions:
 
 
 @dataclass
-class BenchCheckOptions:
+class BenchCheckOptions(SetOptions):
     """``artgs bench-check``: manipulation success per category (the paper's Table II)."""
 
-    set: str | None = option(None, SET_HELP)
-    data: str | None = option(None, "folder of `artgs synth` captures (same as --set data:DIR)")
     per_category: int = option(2, "objects per category (generated sets)")
-    seed: int = option(0, "seed of the generated set")
     category: list[str] | None = option(None, "generated sets: only these categories",
                                         choices=CATEGORIES)
-    width: int = option(160, "generated sets: image width")
-    height: int = option(120, "generated sets: image height")
-    iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
-                             "depth-initialised splat)")
     robot: str = option("franka_panda", "robot from pybullet_data", choices=ROBOTS)
-    device: str = option("auto", "where torch work runs", choices=DEVICES)
