@@ -27,7 +27,7 @@ from artgs.core.model.joints import read_articulation
 from artgs.core.model.ply import read_ply
 from artgs.core.synth.generate import generate_object
 
-ITERATIONS = "15"
+FAST = ("--reconstruct-iterations", "15", "--optimise-iterations", "10")
 OUTPUTS = ("splat.ply", "proposals.json", "articulation.json", "report.json")
 BACKENDS = ("local", "ray")
 
@@ -75,7 +75,7 @@ def captures(tmp_path_factory) -> dict[str, Path]:
 def reference(captures, tmp_path_factory) -> dict[str, Path]:
     """``artgs run`` on the cabinet, one thread (as each batch worker here)."""
     out = tmp_path_factory.mktemp("ref") / "cabinet"
-    res = _artgs("run", str(captures["cabinet"]), "--out", str(out), "--reconstruct-iterations", ITERATIONS,
+    res = _artgs("run", str(captures["cabinet"]), "--out", str(out), *FAST,
                  "--quiet", env=_env(OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1"))
     assert res.returncode == 0, res.stderr
     return {"cabinet": out}
@@ -114,7 +114,7 @@ def test_batch_runs_each_capture_like_artgs_run_and_isolates_the_bad_one(
     lst = tmp_path / "captures.txt"
     lst.write_text(f"# three captures\n{captures['cabinet']}\n{captures['broken']}\n")
     res = _artgs("batch", str(captures["drawer"]), "--list", str(lst), "--out", str(out),
-                 "--workers", "2", "--reconstruct-iterations", ITERATIONS, "--json", *_backend_flags(backend))
+                 "--workers", "2", *FAST, "--json", *_backend_flags(backend))
     assert res.returncode == 1, res.stderr + res.stdout   # one capture failed
     events = [json.loads(ln) for ln in res.stdout.splitlines() if ln.startswith("{")]
     bars = [e for e in events if e["event"] == "progress" and e["stage"] == "batch"]
@@ -145,7 +145,7 @@ def test_batch_runs_each_capture_like_artgs_run_and_isolates_the_bad_one(
     # again: the finished captures are skipped, their outputs untouched
     mtimes = {n: (out / n / "splat.ply").stat().st_mtime_ns for n in ("cabinet", "drawer")}
     res = _artgs("batch", str(captures["drawer"]), str(captures["cabinet"]), "--out", str(out),
-                 "--workers", "2", "--reconstruct-iterations", ITERATIONS, *_backend_flags(backend))
+                 "--workers", "2", *FAST, *_backend_flags(backend))
     assert res.returncode == 0, res.stderr
     rows = _summary(out)
     assert rows["cabinet"]["status"] == rows["drawer"]["status"] == "skipped"
@@ -155,7 +155,7 @@ def test_batch_runs_each_capture_like_artgs_run_and_isolates_the_bad_one(
         return
     # a changed option is a changed result: that capture runs again
     res = _artgs("batch", str(captures["drawer"]), "--out", str(out), "--workers", "2",
-                 "--reconstruct-iterations", "3", "--quiet")
+                 "--reconstruct-iterations", "3", "--optimise-iterations", "10", "--quiet")
     assert res.returncode == 0, res.stderr
     assert _summary(out)["drawer"]["status"] == "ok"
     assert (out / "drawer" / "splat.ply").stat().st_mtime_ns > mtimes["drawer"]
@@ -176,7 +176,7 @@ def _wait_for(path: Path, text: str, proc: subprocess.Popen, timeout: float = 12
 def test_a_worker_killed_mid_way_is_run_again(backend, captures, reference, tmp_path):
     out = tmp_path / "batch"
     proc = _start("batch", str(captures["cabinet"]), "--out", str(out), "--workers", "2",
-                  "--reconstruct-iterations", ITERATIONS, "--quiet", *_backend_flags(backend))
+                  *FAST, "--quiet", *_backend_flags(backend))
     log = _wait_for(out / "cabinet.log", "[reconstruct]", proc)
     pid = int(log.split(", pid ", 1)[1].split(",", 1)[0])
     assert pid != proc.pid
@@ -193,7 +193,7 @@ def test_a_worker_killed_mid_way_is_run_again(backend, captures, reference, tmp_
 def test_local_pool_gives_up_on_a_capture_whose_worker_keeps_dying(captures, tmp_path):
     out = tmp_path / "batch"
     proc = _start("batch", str(captures["cabinet"]), "--out", str(out), "--retries", "0",
-                  "--reconstruct-iterations", ITERATIONS, "--quiet")
+                  *FAST, "--quiet")
     log = _wait_for(out / "cabinet.log", "[reconstruct]", proc)
     os.kill(int(log.split(", pid ", 1)[1].split(",", 1)[0]), signal.SIGKILL)
     _, stderr = proc.communicate(timeout=120)
@@ -207,7 +207,7 @@ def test_ctrl_c_stops_cleanly_and_the_next_call_resumes_after_the_finished_stage
         captures, reference, tmp_path):
     out = tmp_path / "batch"
     args = ("batch", str(captures["cabinet"]), "--out", str(out), "--workers", "2",
-            "--reconstruct-iterations", ITERATIONS)
+            *FAST)
     proc = _start(*args)
     _wait_for(out / "cabinet.log", "[propose]", proc)
     splat_mtime = (out / "cabinet" / "splat.ply").stat().st_mtime_ns
