@@ -21,14 +21,14 @@ def _modules() -> list[ModuleType]:
     """The modules that register something, in registration order."""
     from .artgs_addon import bone_props, preferences, properties
     from .operators import bones as bone_operators
-    from .operators import capture, engine, export, propose, splat
+    from .operators import capture, engine, export, optimise, propose, splat
     from .panels import bones as bone_panel
     from .panels import capture as capture_panel
     from .panels import pipeline, stages
     from .panels import splat as splat_panel
 
     return [preferences, properties, bone_props,
-            engine, capture, splat, propose, bone_operators, export,
+            engine, capture, splat, propose, bone_operators, optimise, export,
             pipeline, capture_panel, splat_panel, bone_panel, stages]
 
 

@@ -94,7 +94,8 @@ def check_transform(obj: bpy.types.Object) -> None:
 
 def build_armature(context: bpy.types.Context, articulation: Articulation,
                    preview: bpy.types.Object | None = None, size: float = 1.0,
-                   name: str = "ArtGS Joints", output: Path | None = None) -> bpy.types.Object:
+                   name: str = "ArtGS Joints", output: Path | None = None,
+                   labels: np.ndarray | None = None) -> bpy.types.Object:
     """Create, or rebuild in place, the armature ``name`` with one bone per joint (world frame).
 
     With ``output`` the armature recorded for that output folder is rebuilt (a new one records
@@ -103,6 +104,8 @@ def build_armature(context: bpy.types.Context, articulation: Articulation,
     world. With ``preview`` (a mesh whose vertices are the object's points), each joint's points
     (``core.parts.assign_parts``) go to a vertex group named after its bone and an Armature
     modifier deforms them, so posing a bone moves its part; the preview is parented to the armature.
+    ``labels`` (per preview vertex: 0 base, k joint k, e.g. the optimisation's part labels)
+    replace the assignment by the joints' boxes.
     """
     if not (math.isfinite(size) and size > 0):
         raise ArtgsError(f"object size must be a positive number of metres, not {size}")
@@ -143,7 +146,7 @@ def build_armature(context: bpy.types.Context, articulation: Articulation,
         refresh_bone(obj, bone.name)
         set_joint_value(obj, bone.name, 0.0)
     if preview is not None:
-        _bind_preview(obj, preview, articulation.joints, old_names)
+        _bind_preview(obj, preview, articulation.joints, old_names, labels)
     obj.select_set(True)
     context.view_layer.objects.active = obj
     return obj
@@ -268,6 +271,19 @@ def edit_mode(context: bpy.types.Context, obj: bpy.types.Object) -> Iterator:
             bpy.ops.object.mode_set(mode=previous)
 
 
+def place_joints(context: bpy.types.Context, obj: bpy.types.Object,
+                 lines: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+    """Move the bones named in ``lines`` onto new world-frame joint lines ``(origin, axis)``
+    (e.g. while an optimisation converges); other bones and every joint property stay."""
+    to_arm = obj.matrix_world.inverted()
+    length = BONE_LENGTH * float(obj.data[SIZE_KEY])
+    with edit_mode(context, obj) as bones:
+        for name, (origin, axis) in lines.items():
+            eb = bones.get(name)
+            if eb is not None and np.linalg.norm(axis) > 0:
+                _place(eb, to_arm, np.asarray(origin, float), np.asarray(axis, float), length)
+
+
 def _place(eb: bpy.types.EditBone, to_arm: Matrix, origin: np.ndarray, axis: np.ndarray,
            length: float) -> None:
     """Put edit bone ``eb`` on the world-frame line from ``origin`` along ``axis``."""
@@ -329,13 +345,14 @@ def _same(a: Joint, b: Joint, size: float) -> bool:
 
 
 def _bind_preview(obj: bpy.types.Object, preview: bpy.types.Object, joints: list[Joint],
-                  old_names: list[str]) -> None:
+                  old_names: list[str], labels: np.ndarray | None = None) -> None:
     """Vertex groups from the part labels, an Armature modifier, and parenting to ``obj``."""
     mesh = preview.data
-    co = np.empty(3 * len(mesh.vertices), np.float32)
-    mesh.vertices.foreach_get("co", co)
-    Mw = np.array(preview.matrix_world)
-    labels = assign_parts(co.reshape(-1, 3) @ Mw[:3, :3].T + Mw[:3, 3], joints)
+    if labels is None:
+        co = np.empty(3 * len(mesh.vertices), np.float32)
+        mesh.vertices.foreach_get("co", co)
+        Mw = np.array(preview.matrix_world)
+        labels = assign_parts(co.reshape(-1, 3) @ Mw[:3, :3].T + Mw[:3, 3], joints)
     for name in set(old_names) | {j.name for j in joints}:
         group = preview.vertex_groups.get(name)
         if group is not None:

@@ -24,6 +24,7 @@ SOURCE_ITEMS = (
     ("vlm", "VLM", "Proposed by a vision-language model"),
     ("motion", "Motion", "Proposed from motion in the interaction frames"),
     ("user", "User", "Added or edited by hand"),
+    ("optimise", "Optimise", "Found by the optimisation: a moving part the proposals missed"),
 )
 
 

@@ -19,6 +19,9 @@ from ..core.model.sampling import subsample
 from .pointcloud import point_cloud_object
 
 SPLAT_KEY = "artgs_splat"  # on a splat preview object: the PLY it shows (absolute path)
+#: Point attribute of a splat preview: the index of each point's Gaussian in the PLY (float, exact
+#: below 2^24 Gaussians), so per-Gaussian results (part labels) map onto a capped preview.
+GAUSSIAN_ATTRIBUTE = "gaussian"
 #: Degree-0 real spherical harmonic Y_0^0 (core.sh.C0): colour = 0.5 + C0 * dc.
 SH_C0 = 0.5 / math.sqrt(math.pi)
 
@@ -51,10 +54,25 @@ def build_splat_preview(context: bpy.types.Context, path: str | Path, cap: int,
     collection = collection or context.scene.collection
     name = f"{path.parent.name} splat" if path.parent.name else "splat"
     obj = point_cloud_object(name, splats.means[sel], splat_colors(splats)[sel], radius,
-                             collection, extra={"opacity": opacity})
+                             collection, extra={"opacity": opacity,
+                                                GAUSSIAN_ATTRIBUTE: _indices(total, sel)})
     obj[SPLAT_KEY] = str(path.resolve())
     obj["artgs_gaussians"] = total
     return SplatPreview(obj, total, len(obj.data.vertices), time.perf_counter() - t0)
+
+
+def _indices(total: int, sel) -> np.ndarray:
+    return np.arange(total, dtype=np.float64)[sel]
+
+
+def gaussian_indices(obj: bpy.types.Object) -> np.ndarray | None:
+    """The PLY index of each vertex of a splat preview (None for other meshes)."""
+    attr = obj.data.attributes.get(GAUSSIAN_ATTRIBUTE)
+    if attr is None:
+        return None
+    values = np.empty(len(obj.data.vertices), np.float32)
+    attr.data.foreach_get("value", values)
+    return np.rint(values).astype(np.int64)
 
 
 def splat_preview_in(folder: Path, preferred: bpy.types.Object | None = None

@@ -84,6 +84,12 @@ class WorkerOperator:
     def cleanup(self, context: bpy.types.Context) -> None:
         """Remove what ``prepare`` made (temporary files)."""
 
+    def restore(self, context: bpy.types.Context) -> None:
+        """Undo what the operator changed in the scene while the job ran (cancel or failure)."""
+
+    def on_progress(self, context: bpy.types.Context, figures: dict[str, Any]) -> None:
+        """Figures of a progress event while the job runs (e.g. joints to show live)."""
+
     def finish(self, context: bpy.types.Context, result: WorkerResult) -> str:
         raise NotImplementedError
 
@@ -124,6 +130,7 @@ class WorkerOperator:
                 stage, message = event.get("stage", ""), event.get("message", "")
                 state.progress = float(event.get("fraction", 0.0))
                 state.message = f"{stage}: {message}".strip(": ")
+                self.on_progress(context, event.get("figures") or {})
             elif kind == protocol.STAGE_DONE:
                 self._figures.update(event.get("figures") or {})
             elif kind == protocol.LOG and event.get("level") == "warning":
@@ -139,10 +146,12 @@ class WorkerOperator:
         result = self._worker.result
         state = self._state(context)
         if result.cancelled:
+            self.restore(context)
             state.restore(self._before)
             self.report({"WARNING"}, f"{self.bl_label}: cancelled")
             return {"CANCELLED"}
         if result.error is not None:
+            self.restore(context)
             return self._fail(context, result.error)
         try:
             summary = self.finish(context, result)

@@ -1,18 +1,10 @@
-"""Optimise section (its engine stage does not exist in this version) and the Export section."""
+"""The Optimise and Export sections of the pipeline panel."""
 
 from __future__ import annotations
 
 import bpy
 
 from .common import ArtgsPanel, draw_figures, draw_state
-
-
-def _draw_unavailable(layout: bpy.types.UILayout, action: str, icon: str, state) -> None:
-    row = layout.row()
-    row.enabled = False
-    row.label(text=action, icon=icon)
-    layout.label(text="Not available in this version", icon="INFO")
-    draw_state(layout, state)
 
 
 class ARTGS_PT_optimise(ArtgsPanel, bpy.types.Panel):
@@ -22,8 +14,8 @@ class ARTGS_PT_optimise(ArtgsPanel, bpy.types.Panel):
 
     def draw(self, context: bpy.types.Context) -> None:
         col = self.layout.column()
-        _draw_unavailable(col, "Optimise Joints (differentiable rendering)",
-                          "MOD_HUE_SATURATION", context.scene.artgs.optimise)
+        col.operator("artgs.optimise_joints", icon="MOD_HUE_SATURATION")
+        draw_state(col, context.scene.artgs.optimise)
         draw_figures(col, context, "optimise")
 
 

@@ -473,3 +473,55 @@ def test_bad_splat_is_reported_in_blender_as_on_the_command_line(scene, tmp_path
     assert str(out / "splat.ply") in message and "vertex[11]" in message and "field 'z'" in message
     assert message in str(err.value) and "Traceback" not in str(err.value)
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_optimise_joints_rebuilds_bones_and_parts_from_the_engine(scene, tmp_path, capture):
+    """Optimise Joints runs `artgs optimise`: the bones end on articulation.json's joints, the
+    splat preview is bound and coloured by the optimisation's part labels; a failure puts the
+    bones back where they were."""
+    from artgs.operators.optimise import PART_COLORS
+
+    settings = scene.artgs
+    settings.capture_dir, settings.output_dir = str(capture), str(tmp_path / "out")
+    _run(bpy.ops.artgs.import_capture)
+    _run(bpy.ops.artgs.reconstruct, iterations=2)
+    _run(bpy.ops.artgs.propose_bones)
+    arm = find_armature(bpy.context)
+    before = {b.name: (tuple(b.head_local), tuple(b.tail_local)) for b in arm.data.bones}
+
+    # A failing run (a splat the engine refuses) leaves the bones as they were.
+    out = tmp_path / "out"
+    good = (out / "splat.ply").read_bytes()
+    (out / "splat.ply").write_bytes(good[:len(good) // 2])
+    with pytest.raises(RuntimeError):
+        bpy.ops.artgs.optimise_joints(iterations=5)
+    assert settings.optimise.status == "FAILED" and "splat.ply" in settings.optimise.message
+    after = {b.name: (tuple(b.head_local), tuple(b.tail_local)) for b in arm.data.bones}
+    for name, (head, tail) in before.items():
+        assert np.allclose(after[name][0], head, atol=1e-6)
+        assert np.allclose(after[name][1], tail, atol=1e-6)
+    (out / "splat.ply").write_bytes(good)
+
+    _run(bpy.ops.artgs.optimise_joints, iterations=5)
+    assert settings.optimise.status == "DONE"
+    art = read_articulation(out / "articulation.json")
+    assert art.meta["optimised"] is True
+    arm = find_armature(bpy.context)
+    M = np.array(arm.matrix_world)
+    for joint in art.joints:
+        bone = arm.data.bones[joint.name]
+        head = M[:3, :3] @ np.array(bone.head_local) + M[:3, 3]
+        axis = M[:3, :3] @ (np.array(bone.tail_local) - np.array(bone.head_local))
+        assert np.linalg.norm(head - joint.origin) < 1e-4
+        assert abs(abs(np.dot(axis / np.linalg.norm(axis), joint.axis)) - 1) < 1e-5
+    preview = next(o for o in bpy.data.objects if o.type == "MESH" and o.parent == arm)
+    labels = np.load(out / "part_labels.npy")
+    index = np.empty(len(preview.data.vertices), np.float32)
+    preview.data.attributes["gaussian"].data.foreach_get("value", index)
+    expect = labels[np.rint(index).astype(int)]
+    for k, joint in enumerate(art.joints, start=1):
+        group = preview.vertex_groups[joint.name].index
+        members = {v.index for v in preview.data.vertices
+                   if any(g.group == group for g in v.groups)}
+        assert members == set(np.flatnonzero(expect == k).tolist())
+    assert preview.data.color_attributes.active_color.name == PART_COLORS
