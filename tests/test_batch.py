@@ -133,6 +133,7 @@ def test_batch_runs_each_capture_like_artgs_run_and_isolates_the_bad_one(
         assert r["joints"] == len(read_articulation(out / name / "articulation.json").joints)
         assert 0.0 <= r["type_accuracy"] <= 1.0 and r["ae_max_deg"] >= r["ae_mean_deg"] >= 0.0
         assert len(truth) >= 1 and r["stage_seconds"]["reconstruct"] > 0
+        assert 0.0 <= r["success"] <= 1.0     # the manipulation check's success rate
         assert "1 thread(s)" in (out / f"{name}.log").read_text()
     bad = rows["broken"]
     assert bad["status"] == "failed"
