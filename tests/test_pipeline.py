@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from artgs.core.model import registry
 from artgs.core.model.joints import read_articulation
 from artgs.core.geometry.metrics import match_joints
 from artgs.core.model.ply import read_ply
@@ -34,10 +35,10 @@ def test_run_writes_every_output_and_finds_the_joints(cabinet, tmp_path):
     assert res.returncode == 0, res.stderr + res.stdout
     events = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
     stages = [e["stage"] for e in events if e["event"] == "stage_done"]
-    assert stages[0] == "validate" and stages[1:] == ["reconstruct", "propose", "optimise"]
+    assert stages[0] == "validate" and stages[1:] == registry.names()
     assert events[-1]["event"] == "finished"
-    assert {"splat.ply", "proposals.json", "articulation.json", "part_labels.npy",
-            "report.json"} <= set(events[-1]["outputs"]["files"])
+    assert {"splat.ply", "proposals.json", "articulation.json", "part_labels.npy", "model.urdf",
+            "parts", "report.json"} <= set(events[-1]["outputs"]["files"])
 
     splat = read_ply(out / "splat.ply")
     assert splat.means.shape[0] > 1000 and splat.sh.shape[1:] in ((1, 3), (4, 3))
@@ -50,10 +51,9 @@ def test_run_writes_every_output_and_finds_the_joints(cabinet, tmp_path):
         assert score.origin_error_cm is None or score.origin_error_cm < 3.0, score
     report = json.loads((out / "report.json").read_text())
     assert report["capture"] == str(cabinet.resolve())
-    assert {"reconstruct", "propose", "optimise", "run"} <= set(report["stages"])
-    assert all(report["stages"][s]["seconds"] > 0
-               for s in ("reconstruct", "propose", "optimise", "run"))
-    assert not [p for p in out.iterdir() if p.name.startswith(".")]    # no temp files left
+    assert set(registry.names()) | {"run"} <= set(report["stages"])
+    assert all(report["stages"][s]["seconds"] > 0 for s in registry.names() + ["run"])
+    assert not [p for p in out.rglob("*") if ".tmp" in p.name]    # no temp files left
 
 
 def test_run_refuses_bad_input_before_any_work(cabinet, tmp_path):
