@@ -137,6 +137,7 @@ def test_batch_runs_each_capture_like_artgs_run_and_isolates_the_bad_one(
         assert r["joints"] == len(read_articulation(out / name / "articulation.json").joints)
         assert 0.0 <= r["type_accuracy"] <= 1.0 and r["ae_max_deg"] >= r["ae_mean_deg"] >= 0.0
         assert len(truth) >= 1 and r["stage_seconds"]["reconstruct"] > 0
+        assert 0.0 <= r["success"] <= 1.0     # the manipulation check's success rate
         assert "1 thread(s)" in (out / f"{name}.log").read_text()
     bad = rows["broken"]
     assert bad["status"] == "failed"
@@ -159,7 +160,7 @@ def test_batch_runs_each_capture_like_artgs_run_and_isolates_the_bad_one(
         return
     # a changed option is a changed result: that capture runs again
     res = _artgs("batch", str(captures["drawer"]), "--out", str(out), "--workers", "2",
-                 "--reconstruct-iterations", "3", "--quiet")
+                 "--reconstruct-iterations", "3", *FAST[2:], "--quiet")
     assert res.returncode == 0, res.stderr
     assert _summary(out)["drawer"]["status"] == "ok"
     assert (out / "drawer" / "splat.ply").stat().st_mtime_ns > mtimes["drawer"]

@@ -14,6 +14,7 @@ at the same path, and ``artgs`` must be installed on every node.
 from __future__ import annotations
 
 import os
+import sys
 import time
 from typing import Any, Callable
 
@@ -24,7 +25,14 @@ from .worker import Outcome, run_job
 CANCEL_GRACE = 30.0   # seconds cancelled tasks get to stop before their workers are killed
 
 
-def _ray() -> Any:
+# Ray resolves 127.0.0.1 to the machine's outward address unless it runs "without clusters"
+# (read when ray is imported); a private Ray must stay on the loopback interface.
+_LOOPBACK_ONLY = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+
+
+def _ray(private: bool) -> Any:
+    if private and "ray" not in sys.modules:
+        os.environ[_LOOPBACK_ONLY] = "0"
     try:
         import ray
     except ImportError:
@@ -46,8 +54,8 @@ def run_ray(jobs: list[Job], stage_options: dict[str, Any], address: str | None,
             started: Callable[[Job, int], None], ended: Callable[[Job, Outcome], None],
             retrying: Callable[[Job, str], None]) -> None:  # noqa: ARG001 - Ray retries itself
     """Run ``jobs`` as Ray tasks on a local Ray (``address`` None) or the cluster at ``address``."""
-    ray = _ray()
     own = address is None
+    ray = _ray(own)
     env = {"OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
     if own:
         ray.init(address="local", _node_ip_address="127.0.0.1", num_cpus=workers * cpus,

@@ -4,7 +4,7 @@ Written as ``DIR/batch_summary.csv`` and ``DIR/batch_summary.json`` (rows plus t
 as a table. Accuracy follows shared/spec/metrics.md (:func:`core.geometry.metrics.match_joints`):
 where the capture holds ``gt.json`` (``artgs synth`` writes one), type accuracy and the mean and
 worst axis error (AE, degrees) and origin error (OE, cm, revolute joints); ``success`` is the
-manipulation check's figure when the pipeline has a ``check`` stage that reported one.
+manipulation check stage's ``success_rate`` (share of parts the robot opened) where it ran.
 """
 
 from __future__ import annotations
