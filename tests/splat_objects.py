@@ -11,7 +11,6 @@ from artgs.core.model import layout
 from artgs.core.model.joints import Articulation, write_articulation
 from artgs.core.model.ply import SplatArrays, write_ply
 from artgs.core.render.sh import C0
-from artgs.core.synth.generate import _ground_truth
 from artgs.core.synth.objects import ObjectSpec, random_spec
 
 
@@ -49,7 +48,11 @@ def make_out(out: Path, category: str = "cabinet", seed: int = 0) -> tuple[Objec
     spec = random_spec(category, seed)
     out.mkdir(parents=True, exist_ok=True)
     write_ply(out / layout.SPLAT, splat_of(spec))
-    art = _ground_truth(spec, [{q.name: 0.0 for q in spec.parts}])
+    joints = spec.joints()
+    for joint in joints:
+        joint.states = {0: 0.0}
+    spec.annotate(joints)
+    art = Articulation(joints, {"category": spec.category, "seed": spec.seed})
     write_articulation(out / layout.ARTICULATION, art)
     write_articulation(out / layout.PROPOSALS, art)
     (out / "gt.urdf").write_text(spec.to_urdf())
