@@ -58,14 +58,25 @@ def _propose(entry: dict, out: Path) -> list[str]:
 
 
 def _optimise(entry: dict, out: Path) -> list[str]:
-    keys = [k for k in entry if "residual" in k]
-    return [f"{k.replace('_', ' ')} {entry[k]:.4g}" for k in keys
-            if isinstance(entry[k], (int, float))]
+    lines = [s for s in (_number(entry.get("loss"), "residual (mean loss) {:.4g}"),) if s]
+    articulation = _cached(out / layout.ARTICULATION, read_articulation)
+    if articulation is not None:
+        for joint in articulation.joints:
+            residual = _number(joint.extra.get("residual"), ", residual {:.4g}") or ""
+            confidence = "" if joint.confidence is None else f", confidence {joint.confidence:.2f}"
+            lines.append(f"{joint.name}: {joint.type}{residual}{confidence}")
+    return lines
 
 
 def _check(entry: dict, out: Path) -> list[str]:
-    keys = [k for k in entry if "success" in k]
-    return [f"{k.replace('_', ' ')}: {entry[k]}" for k in keys]
+    joints = entry.get("joints") if isinstance(entry.get("joints"), dict) else {}
+    opened = sum(bool(r.get("success")) for r in joints.values() if isinstance(r, dict))
+    lines = [f"opened {opened} of {len(joints)} parts"] if joints else []
+    for name, result in joints.items():
+        if isinstance(result, dict):
+            why = "" if result.get("success") else f": {result.get('reason', 'failed')}"
+            lines.append(f"{name}: {'opened' if result.get('success') else 'not opened'}{why}")
+    return lines
 
 
 #: report.json stage -> what its panel shows.

@@ -440,11 +440,17 @@ def test_stage_panels_show_the_last_runs_key_figures(tmp_path):
     os.utime(tmp_path / "report.json", (later, later))
     assert key_figures(tmp_path, "reconstruct")[1:] == [
         "100 Gaussians", "no held-out views (PSNR not measured)"]
-    layout.update_report(tmp_path, "optimise", axis_residual_deg=0.41)
-    layout.update_report(tmp_path, "check", success=True)
+    layout.update_report(tmp_path, "optimise", loss=0.0123, joints=1)
+    write_articulation(tmp_path / "articulation.json", Articulation([
+        Joint("door", "revolute", [0, 0, 1], [0.1, 0, 0], (0, 1.5), confidence=0.9,
+              extra={"residual": 0.0111})]))
+    layout.update_report(tmp_path, "check", success_rate=0.5, joints={
+        "door": {"success": True}, "drawer": {"success": False, "reason": "slipped"}})
     os.utime(tmp_path / "report.json", (later + 5, later + 5))
-    assert key_figures(tmp_path, "optimise")[1:] == ["axis residual deg 0.41"]
-    assert key_figures(tmp_path, "check")[1:] == ["success: True"]
+    assert key_figures(tmp_path, "optimise")[1:] == [
+        "residual (mean loss) 0.0123", "door: revolute, residual 0.0111, confidence 0.90"]
+    assert key_figures(tmp_path, "check")[1:] == [
+        "opened 1 of 2 parts", "door: opened", "drawer: not opened: slipped"]
 
 
 def test_bad_splat_is_reported_in_blender_as_on_the_command_line(scene, tmp_path, capture):

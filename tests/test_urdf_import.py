@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
-# Writes the URDFs it imports with the engine's modules (trimesh, scipy): skipped, with this
-# reason, in the bpy 5.x half of `make test`, whose venv holds no engine.
-trimesh = pytest.importorskip("trimesh", reason="needs the engine's modules in Blender's Python")
+# Engine modules run in this process here: in the bpy 5.x half of `make test` (numpy-only venv)
+# this file is skipped, with this reason in the summary.
+trimesh = pytest.importorskip("trimesh", reason="needs the engine's packages in Blender's process "
+                              "(not in the bpy 5.x venv)")
 from mathutils import Matrix  # noqa: E402
 
 import artgs  # noqa: E402

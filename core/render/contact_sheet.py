@@ -2,8 +2,9 @@
 
 Panels, each present when its inputs are in OUT: a capture frame; the reconstructed splat;
 the proposed joints drawn over the splat with each part's Gaussians coloured; the object posed
-open by the joints (every part moved to the end of its range); and the optimised joints
-(``articulation.json``) when optimisation has run. The splat is rendered with ``rasterize()``
+open by the joints (every part moved to the end of its range); the optimised joints
+(``articulation.json``, parts from ``part_labels.npy``) when optimisation has run; and the
+manipulation check's frames (``check.png``) when the check has run. The splat is rendered with ``rasterize()``
 from the first static camera of the capture; joint axes are projected with the same camera.
 OpenCV draws the lines and the labels (it is an engine dependency already).
 """
@@ -178,7 +179,7 @@ def panels(out: Path, capture_path: Path, width: int = 240) -> list[Panel]:
     joints = {name: read_articulation(out / file).joints
               for name, file in (("joints", layout.PROPOSALS), ("optimised", layout.ARTICULATION))
               if splats is not None and (out / file).is_file()}
-    labels = {name: assign_parts(splats.means, js) for name, js in joints.items()}
+    labels = {name: _labels(out, name, splats, js) for name, js in joints.items()}
     view = best_view(splats, labels["joints"], [f.camera for f in capture.static]) \
         if "joints" in labels and proposals.is_file() else 0
     frame = capture.static[view]
@@ -199,7 +200,37 @@ def panels(out: Path, capture_path: Path, width: int = 240) -> list[Panel]:
         if name == "joints":
             result.append(Panel("posed", "Posed open",
                                 render_splat(posed(splats, joints[name], labels[name]), camera)))
+    strip = out / layout.CHECK_STRIP
+    if strip.is_file():
+        image = cv2.imread(str(strip), cv2.IMREAD_COLOR)
+        if image is not None:
+            result.append(Panel("check", "Manipulation check (PyBullet)",
+                                _fit(cv2.cvtColor(image, cv2.COLOR_BGR2RGB), size)))
     return result
+
+
+def _labels(out: Path, name: str, splats: SplatArrays, joints: list[Joint]) -> np.ndarray:
+    """Part of every Gaussian: the optimisation's own labels (part_labels.npy) for the optimised
+    joints, else the joints' extent boxes."""
+    path = out / layout.PART_LABELS
+    if name == "optimised" and path.is_file():
+        labels = np.load(path)
+        if labels.shape == (len(splats),):
+            return labels.astype(np.int64)
+    return assign_parts(splats.means, joints)
+
+
+def _fit(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``image`` scaled to fit ``size`` (width, height), centred on the background."""
+    import cv2
+
+    w, h = size
+    scale = min(w / image.shape[1], h / image.shape[0])
+    fw, fh = max(1, int(image.shape[1] * scale)), max(1, int(image.shape[0] * scale))
+    out = np.full((h, w, 3), int(255 * BACKGROUND[0]), np.uint8)
+    y, x = (h - fh) // 2, (w - fw) // 2
+    out[y:y + fh, x:x + fw] = cv2.resize(image, (fw, fh), interpolation=cv2.INTER_AREA)
+    return out
 
 
 def write_contact_sheet(out: Path, capture_path: Path, path: Path, width: int = 240,
