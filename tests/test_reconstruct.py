@@ -111,7 +111,9 @@ def test_holdout_views_are_never_used(capture):
                   ReconstructConfig(), torch.device("cpu"))
     for _ in range(40):
         a, b = float(tr.step()[0]), float(tr2.step()[0])
-        assert a == pytest.approx(b, rel=1e-5)
+        # rel 1e-4: numba's multi-threaded gradient sums differ in the last bits run to run
+        # (1.0e-5 measured on one CPU); a used garbage view would change the loss by far more.
+        assert a == pytest.approx(b, rel=1e-4)
     np.testing.assert_allclose(tr.splat().means, tr2.splat().means, atol=1e-6)
 
 
