@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
+from registered_addon import addon, ctx  # noqa: E402,F401 (fixtures)
 from mathutils import Matrix, Vector  # noqa: E402
 
 import artgs  # noqa: E402
@@ -22,29 +23,6 @@ from engine_env import TESTS, engine_python  # noqa: E402
 
 DEG = math.pi / 180
 _BONE_CLASSES = [c for m in (bone_props, bone_operators, bone_panel) for c in m.CLASSES]
-
-
-@pytest.fixture(scope="module")
-def addon():
-    """The whole add-on registered (unless something else registered it already).
-
-    bpy 4.5 as a module hangs at process exit while property groups with Python callbacks are
-    registered, so whatever this registers it always unregisters.
-    """
-    mine = not bone_props.ArtgsJointProps.is_registered
-    if mine:
-        artgs.register()
-    try:
-        yield
-    finally:
-        if mine:
-            artgs.unregister()
-
-
-@pytest.fixture
-def ctx(addon):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    return bpy.context
 
 
 def _box(center, half, axes=np.eye(3)) -> dict:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
+from registered_addon import addon, ctx  # noqa: E402,F401 (fixtures)
 # Engine modules run in this process here: in the bpy 5.x half of `make test` (numpy-only venv)
 # this file is skipped, with this reason in the summary.
 trimesh = pytest.importorskip("trimesh", reason="needs the engine's packages in Blender's process "
@@ -24,24 +25,6 @@ from artgs.core.sim.validate import fk_check  # noqa: E402
 from artgs.core.stages.export.collision import write_obj  # noqa: E402
 from artgs.core.stages.export.stage import link_frames, urdf_joint  # noqa: E402
 from artgs.core.synth.objects import random_spec  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def addon():
-    mine = not bone_props.ArtgsJointProps.is_registered
-    if mine:
-        artgs.register()
-    try:
-        yield
-    finally:
-        if mine:
-            artgs.unregister()
-
-
-@pytest.fixture
-def ctx(addon):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    return bpy.context
 
 
 def _joints() -> list[Joint]:
