@@ -34,7 +34,7 @@ class ARTGS_OT_propose_bones(WorkerOperator, bpy.types.Operator):
     bl_idname = "artgs.propose_bones"
     bl_label = "Propose Bones"
     bl_options = {"REGISTER", "UNDO"}
-    stage = "bones"
+    stage = "propose"
     command = "propose"
 
     @classmethod

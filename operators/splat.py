@@ -36,7 +36,7 @@ class ARTGS_OT_reconstruct(WorkerOperator, bpy.types.Operator):
     bl_idname = "artgs.reconstruct"
     bl_label = "Reconstruct Splat"
     bl_options = {"REGISTER", "UNDO"}
-    stage = "splat"
+    stage = "reconstruct"
     command = "reconstruct"
 
     iterations: IntProperty(name="Iterations", default=0, min=0,
@@ -82,10 +82,10 @@ class ARTGS_OT_import_splat(bpy.types.Operator):
         try:
             summary = load_splat_preview(context, path)
         except (ArtgsError, OSError, ValueError) as exc:
-            settings.splat.set("FAILED", str(exc))
+            settings.reconstruct.set("FAILED", str(exc))
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        settings.splat.set("DONE", summary, 1.0)
+        settings.reconstruct.set("DONE", summary, 1.0)
         self.report({"INFO"}, f"Splat preview: {summary}")
         return {"FINISHED"}
 
