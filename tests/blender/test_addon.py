@@ -2,7 +2,7 @@
 engine (cameras reproduce K, point count), Import Splat (count, colours), engine failures leave the
 scene as it was, two objects in one scene (one armature each).
 
-The whole pipeline through the operators runs in tests/test_addon_pipeline.py (a subprocess).
+The whole pipeline through the operators runs in tests/blender/test_addon_pipeline.py (a subprocess).
 """
 
 from __future__ import annotations

@@ -24,6 +24,7 @@ from artgs.core.model.errors import InputError
 from artgs.core.model.ply import SplatArrays, read_ply, write_ply
 from artgs.core.model.registry import ReconstructOptions
 from artgs.core.stages.reconstruct import check as check_reconstruct
+from ply_poke import poke_ply  # tests/ is on sys.path under pytest
 
 W, H = 12, 9
 SETTINGS = settings(max_examples=60, deadline=None, derandomize=True,
@@ -250,15 +251,3 @@ def test_writer_refuses_what_the_reader_would_refuse(tmp_path):
     with pytest.raises(ValueError, match=r"quats\[2, 0\] is the zero quaternion"):
         write_ply(tmp_path / "s.ply", splat)
     assert not list(tmp_path.iterdir())
-
-
-def poke_ply(path: Path, row: int, field: str, value: float) -> None:
-    """Set one float32 value of a binary little-endian PLY written by write_ply (which itself
-    refuses to write values no splat can hold)."""
-    data = bytearray(path.read_bytes())
-    head_end = data.index(b"end_header\n") + len(b"end_header\n")
-    names = [line.split()[-1] for line in data[:head_end].decode().splitlines()
-             if line.startswith("property")]
-    offset = head_end + 4 * (row * len(names) + names.index(field))
-    data[offset:offset + 4] = np.float32(value).tobytes()
-    path.write_bytes(bytes(data))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,7 +19,9 @@ from artgs.core.model.errors import ArtgsError  # noqa: E402
 from artgs.core.model.joints import Articulation, Joint, read_articulation, write_articulation  # noqa: E402
 from artgs.operators import bones as bone_operators  # noqa: E402
 from artgs.panels import bones as bone_panel  # noqa: E402
-from engine_env import TESTS, engine_python  # noqa: E402
+from engine_env import engine_python  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
 
 DEG = math.pi / 180
 _BONE_CLASSES = [c for m in (bone_props, bone_operators, bone_panel) for c in m.CLASSES]
@@ -441,7 +444,7 @@ def test_select_joint_in_every_mode(ctx, mode):
 #: Builds the test armature with bpy 4.5 (the engine's interpreter) and saves it.
 _MAKE_45_BLEND = """
 import sys, bpy, artgs
-sys.path.insert(0, {tests!r})
+sys.path[:0] = {paths!r}
 from test_armature import _articulation
 from artgs.artgs_addon import armature
 artgs.register()
@@ -462,7 +465,7 @@ def test_scene_made_in_4_5_selects_in_this_blender(ctx, tmp_path):
     joints can be picked in Pose mode and Object mode."""
     engine = engine_python()
     blend = tmp_path / "made_in_45.blend"
-    proc = subprocess.run([engine, "-c", _MAKE_45_BLEND.format(tests=str(TESTS),
+    proc = subprocess.run([engine, "-c", _MAKE_45_BLEND.format(paths=[str(HERE), str(HERE.parent)],
                                                                 blend=str(blend))],
                           capture_output=True, text=True, timeout=300)
     if "No module named 'bpy'" in proc.stderr:

@@ -18,7 +18,7 @@ from engine_env import engine_python
 from engine_env import generate_capture as generate_object
 
 pytest.importorskip("bpy")
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 #: Engine dependencies that must never load in Blender's process.
 HEAVY = ("cv2", "torch", "scipy", "numba", "pybullet", "trimesh", "yourdfpy", "gsplat")
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 pytest.importorskip("bpy")
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location("build_extension", ROOT / "scripts" / "build_extension.py")
 build_extension = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(build_extension)

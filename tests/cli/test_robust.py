@@ -32,7 +32,7 @@ from artgs.core.model.protocol import EXIT_BAD_INPUT, EXIT_CANCELLED, EXIT_FAILE
 from artgs.core.stages.reconstruct import reconstruct
 from artgs.core.synth.generate import generate_object
 
-from test_fuzz_inputs import poke_ply  # noqa: E402 - tests/ is on sys.path under pytest
+from ply_poke import poke_ply  # noqa: E402 - tests/ is on sys.path under pytest
 
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p),
        "OMP_WAIT_POLICY": "PASSIVE"}
