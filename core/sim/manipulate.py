@@ -5,15 +5,19 @@ One episode per joint, in its own ``DIRECT`` client:
 
 - the object URDF is loaded with a fixed base; the operated joint is free, the others are held
   closed; each part weighs ``PART_MASS`` so the outcome measures the joint, not the payload;
-- the robot (``pybullet_data``) stands on a pedestal in front of the handle, facing along the
-  approach direction; its base is the candidate place from which inverse kinematics reaches the
-  whole planned handle path best;
+- the robot (``pybullet_data``) stands in front of the handle, facing along the approach
+  direction; its base is the candidate place that reaches the grasp and from which inverse
+  kinematics, followed along the planned handle path (each pose seeded from the last, as the arm
+  moves), stays closest to the path and away from joint limits; the arm's pose halfway along that
+  path is the posture the null space pulls towards;
 - it starts at the grasp pose and holds the handle: a point-to-point constraint between the
   gripper's grasp point and the part, limited to ``GRASP_FORCE`` (a parallel gripper's holding
   force times friction 1); collisions between robot and object are off;
 - the gripper follows the handle path of the PLANNED joint (minimum-jerk in the joint value) under
-  Cartesian impedance control, tau = J^T (K (x_d - x) - D xdot) + g(q) (gravity compensation
-  from inverse dynamics), plus joint damping in the null space;
+  Cartesian impedance control in operational-space form, tau = J^T Lambda (K (x_d - x) - D xdot)
+  + C(q, qdot) qdot + g(q) (gravity and Coriolis from PyBullet's inverse dynamics) plus a null-space
+  posture term (``_Robot.impedance_step``); the URDF's joint damping is switched off (the
+  controller damps; an explicit damping of 1 N m s on xarm6's 0.1 kg wrist is unstable at 240 Hz);
 - the grasp is lost when the gripper and the grasped point drift ``LOST_DISTANCE`` apart;
   success when the TRUE joint (the URDF's) reaches the target of metrics.md with the grasp held.
 """
@@ -33,9 +37,12 @@ DT = 1.0 / 240.0
 GRASP_FORCE = 70.0          # N
 LOST_DISTANCE = 0.02        # m
 PART_MASS = 1.0             # kg
-K_POS, D_POS = 1500.0, 40.0
-K_ROT, D_ROT = 15.0, 0.3
-NULL_STIFFNESS, NULL_DAMPING = 2.0, 0.5
+# operational-space gains per unit task mass: K = w^2, D = 2 w (critically damped), w well
+# below the step rate (w DT < 0.2) so the explicit control step stays stable
+K_POS, D_POS = 40.0 ** 2, 2 * 40.0
+K_ROT, D_ROT = 30.0 ** 2, 2 * 30.0
+NULL_STIFFNESS, NULL_DAMPING = 10.0, 2 * 10.0 ** 0.5
+LAMBDA_DAMPING = 1e-4       # regularises (J M^-1 J^T) near singular poses
 OVERSHOOT = 1.15            # the plan goes this much past the target
 
 
@@ -211,6 +218,7 @@ class _Robot:
             names[info[1].decode()] = i
             if info[2] != p.JOINT_FIXED:
                 self.movable.append(i)
+                p.changeDynamics(body, i, jointDamping=0.0, physicsClientId=client)
         self.ee = names[model.ee_link]
         self.arm = self.movable[:len(model.rest)]
         info = [p.getJointInfo(body, i, physicsClientId=client) for i in self.movable]
@@ -230,10 +238,10 @@ class _Robot:
         for i in self.fingers:
             self.p.resetJointState(self.body, i, 0.0, physicsClientId=self.client)
 
-    def ik(self, pose: np.ndarray) -> list[float]:
-        """Arm joint values reaching ``pose`` (seeded from the rest pose)."""
+    def ik(self, pose: np.ndarray, seed=None) -> list[float]:
+        """Arm joint values reaching ``pose``, seeded from ``seed`` (default: the rest pose)."""
         p = self.p
-        self.set_arm(self.model.rest)
+        self.set_arm(self.model.rest if seed is None else seed)
         quat = _quat(pose[:3, :3])
         for _ in range(3):
             sol = p.calculateInverseKinematics(
@@ -264,8 +272,17 @@ class _Robot:
                                         physicsClientId=self.client)
 
     def impedance_step(self, goal: np.ndarray) -> float:
-        """Apply tau = J^T (K e - D v) + g(q) for one step; returns the position error."""
-        p, c = self.p, self.client
+        """Apply one step of Cartesian impedance control in the operational-space form,
+        tau = J^T Lambda (K e - D v) + C(q, qd) qd + g(q) + null-space posture, and return the
+        position error.
+
+        Lambda = (J M^-1 J^T)^-1 (PyBullet's mass matrix) makes the closed loop a unit-mass
+        spring-damper in every task direction, so one set of gains (K = w^2, D = 2 w) is stable
+        for every robot and pose: with the plain J^T (K e - D v) the wrist of a light arm
+        (xarm6's last link weighs 0.1 kg) oscillates at the step rate. Gravity and Coriolis come
+        from PyBullet's inverse dynamics at the current velocity; the null-space term (the
+        dynamically consistent projector) pulls a redundant arm towards its rest pose."""
+        p, c, n = self.p, self.client, len(self.arm)
         states = p.getJointStates(self.body, self.movable, physicsClientId=c)
         q = [s[0] for s in states]
         qd = [s[1] for s in states]
@@ -276,20 +293,24 @@ class _Robot:
         v, w = np.array(ls[6]), np.array(ls[7])
         e_pos = goal[:3, 3] - x
         e_rot = _rotvec(goal[:3, :3] @ R.T)
-        J_lin, J_ang = p.calculateJacobian(self.body, self.ee, self.ee_com_offset, q,
-                                           [0.0] * len(q), [0.0] * len(q), physicsClientId=c)
+        zeros = [0.0] * len(q)
+        J_lin, J_ang = p.calculateJacobian(self.body, self.ee, self.ee_com_offset, q, zeros,
+                                           zeros, physicsClientId=c)
         # PyBullet gives the Jacobian in the base frame: rotate it into the world
         Rb = np.array(p.getMatrixFromQuaternion(
             p.getBasePositionAndOrientation(self.body, physicsClientId=c)[1])).reshape(3, 3)
-        J = np.vstack([Rb @ np.array(J_lin), Rb @ np.array(J_ang)])[:, :len(self.arm)]
-        wrench = np.concatenate([K_POS * e_pos - D_POS * v, K_ROT * e_rot - D_ROT * w])
-        gravity = np.array(p.calculateInverseDynamics(self.body, q, [0.0] * len(q),
-                                                      [0.0] * len(q), physicsClientId=c))
-        qd_arm = np.array(qd[:len(self.arm)])
-        null = np.eye(len(self.arm)) - J.T @ np.linalg.pinv(J.T)
-        rest = np.array(self.rest[:len(self.arm)]) - np.array(q[:len(self.arm)])
-        tau = J.T @ wrench + gravity[:len(self.arm)] + null @ (NULL_STIFFNESS * rest
-                                                              - NULL_DAMPING * qd_arm)
+        J = np.vstack([Rb @ np.array(J_lin), Rb @ np.array(J_ang)])[:, :n]
+        M = np.array(p.calculateMassMatrix(self.body, q, physicsClientId=c))[:n, :n]
+        M_inv = np.linalg.inv(M)
+        Lam = np.linalg.inv(J @ M_inv @ J.T + LAMBDA_DAMPING * np.eye(6))
+        accel = np.concatenate([K_POS * e_pos - D_POS * v, K_ROT * e_rot - D_ROT * w])
+        bias = np.array(p.calculateInverseDynamics(self.body, q, qd, zeros, physicsClientId=c))
+        qd_arm = np.array(qd[:n])
+        J_bar = M_inv @ J.T @ Lam
+        null = np.eye(n) - J.T @ J_bar.T
+        rest = np.array(self.rest[:n]) - np.array(q[:n])
+        posture = M @ (NULL_STIFFNESS * rest - NULL_DAMPING * qd_arm)
+        tau = J.T @ Lam @ accel + bias[:n] + null @ posture
         p.setJointMotorControlArray(self.body, self.arm, p.TORQUE_CONTROL, forces=tau.tolist(),
                                     physicsClientId=c)
         return float(np.linalg.norm(e_pos))
@@ -306,10 +327,11 @@ def _place_robot(model: RobotModel, path: list[np.ndarray], client: int, data: s
     side = np.cross([0.0, 0.0, 1.0], approach)
     mid = (start + end) / 2
     yaw = math.atan2(approach[1], approach[0])
+    # inertia from the links' shapes, not the files: PyBullet rejects xarm6's inertia tensors
+    # ("bad inertia tensor", set to zero), which makes its mass matrix singular
     body = p.loadURDF(os.path.join(data, model.urdf), useFixedBase=True,
-                      physicsClientId=client,
-                      flags=p.URDF_USE_INERTIA_FROM_FILE)
-    best, best_err = None, np.inf
+                      physicsClientId=client)
+    best, best_err = None, (True, np.inf)
     for d in (0.45, 0.6, 0.75):
         for lateral in (-0.2, 0.0, 0.2):
             for dz in (-0.5, -0.3):
@@ -319,20 +341,26 @@ def _place_robot(model: RobotModel, path: list[np.ndarray], client: int, data: s
                                                   p.getQuaternionFromEuler([0, 0, yaw]),
                                                   physicsClientId=client)
                 robot = _Robot(model, body, base, client)
-                err = 0.0
-                for pose in path[::2]:
-                    q = np.array(robot.ik(pose))
+                err, q, qs, misses_grasp = 0.0, None, [], False
+                for pose in path:       # each pose seeded from the last, as the arm moves
+                    q = np.array(robot.ik(pose, q))
+                    qs.append(q)
                     e = robot.ee_pose()
+                    if not qs[1:]:      # the grasp itself must be reached: ranks first
+                        misses_grasp = float(np.linalg.norm(e[:3, 3] - pose[:3, 3])) > 0.01
                     margin = np.minimum(q - robot.lower[:len(q)], robot.upper[:len(q)] - q).min()
                     err = max(err, float(np.linalg.norm(e[:3, 3] - pose[:3, 3]))
                               + 0.05 * float(np.linalg.norm(_rotvec(pose[:3, :3] @ e[:3, :3].T)))
                               + 0.05 * max(0.0, 0.3 - float(margin)))
-                if err < best_err:
-                    best, best_err = base, err
+                if (misses_grasp, err) < best_err:
+                    best, best_err, best_qs = base, (misses_grasp, err), qs
     p.resetBasePositionAndOrientation(body, best.tolist(), p.getQuaternionFromEuler([0, 0, yaw]),
                                       physicsClientId=client)
     robot = _Robot(model, body, best, client)
-    robot.set_arm(robot.ik(path[0]))
+    # the null-space posture: the arm's pose halfway along the path, away from the joint limits
+    # the ends of the path may approach
+    robot.rest[:len(robot.arm)] = best_qs[len(best_qs) // 2].tolist()
+    robot.set_arm(best_qs[0])
     robot.release_motors()
     return robot
 
