@@ -8,7 +8,7 @@ import bpy
 from bpy.props import EnumProperty, FloatProperty, PointerProperty, StringProperty
 
 #: Pipeline stages shown in the panel, in order.
-STAGES = ("capture", "splat", "bones", "optimise", "export")
+STAGES = ("capture", "splat", "bones", "optimise", "export", "check")
 
 STATUSES = (("NOT_RUN", "Not Run", "The stage has not run in this scene"),
             ("RUNNING", "Running", "The stage is running"),
@@ -68,6 +68,7 @@ class ArtgsSceneSettings(bpy.types.PropertyGroup):
     bones: PointerProperty(type=ArtgsStageState)
     optimise: PointerProperty(type=ArtgsStageState)
     export: PointerProperty(type=ArtgsStageState)
+    check: PointerProperty(type=ArtgsStageState)
 
     @property
     def capture_path(self) -> Path | None:

@@ -133,8 +133,9 @@ def test_check_operator_runs_in_the_engine_and_loads_the_strip(ctx, tmp_path):
     ctx.scene.artgs.output_dir = str(out)
     assert bpy.ops.artgs.export_urdf.poll() and bpy.ops.artgs.check_manipulation.poll()
     assert bpy.ops.artgs.check_manipulation("EXEC_DEFAULT") == {"FINISHED"}
-    state = ctx.scene.artgs.export
+    state = ctx.scene.artgs.check
     assert state.status == "DONE" and "opened 2/2" in state.text, state.text
+    assert ctx.scene.artgs.export.status == "NOT_RUN"      # the check has its own state
     image = bpy.data.images[STRIP_IMAGE]
     assert tuple(image.size) == (6 * 160, 2 * 120)
     # Import URDF through its operator
