@@ -29,6 +29,7 @@ class ARTGS_PT_export(ArtgsPanel, bpy.types.Panel):
         col.operator("artgs.add_crop_box", icon="CUBE")
         col.operator("artgs.export_urdf", icon="EXPORT")
         draw_state(col, context.scene.artgs.export)
+        draw_figures(col, context, "export")
         row = col.row(align=True)
         row.operator("artgs.check_manipulation", icon="CON_ARMATURE")
         row.operator("artgs.show_check_frames", text="", icon="IMAGE_DATA")

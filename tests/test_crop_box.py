@@ -61,14 +61,12 @@ def _with_chair(out, spec) -> int:
     return n
 
 
-def test_blender_crop_box_reaches_the_engine_and_crops_the_export(tmp_path):
+def test_blender_crop_box_reaches_the_engine_and_crops_the_export(ctx, tmp_path):
     bpy = pytest.importorskip("bpy")
     pytest.importorskip("trimesh", reason="reads the exported meshes")
     import trimesh
 
-    import artgs
-    from artgs.artgs_addon import bone_props
-    from artgs.artgs_addon.crop_box import CROP_BOX
+    from artgs.artgs_addon.crop_box import CROP_BOX, sync_crop
     from engine_env import generate_capture
     from splat_objects import make_out
 
@@ -78,45 +76,36 @@ def test_blender_crop_box_reaches_the_engine_and_crops_the_export(tmp_path):
     object_pts = read_ply(out / layout.SPLAT).means
     chair = _with_chair(out, spec)
 
-    mine = not bone_props.ArtgsJointProps.is_registered
-    if mine:
-        artgs.register()
-    try:
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        scene = bpy.context.scene
-        scene.artgs.output_dir = str(out)
-        # the engine's export reads the capture (for its masks: this one has them, so the crop
-        # box alone separates the object)
-        scene.artgs.capture_dir = str(generate_capture(tmp_path / "cap", "cabinet", 0, width=64,
-                                                       height=48))
-        assert bpy.ops.artgs.add_crop_box() == {"FINISHED"}
-        obj = scene.objects[CROP_BOX]
-        assert obj.type == "EMPTY" and obj.empty_display_type == "CUBE"
-        # around the object (its Gaussians + 3 cm), turned 3 degrees about z
-        lo, hi = object_pts.min(0) - 0.03, object_pts.max(0) + 0.03
-        obj.location = tuple((lo + hi) / 2)
-        obj.rotation_euler = (0.0, 0.0, np.deg2rad(3.0))
-        obj.scale = tuple((hi - lo) / 2 + 0.05)
-        bpy.context.view_layer.update()
-        assert bpy.ops.artgs.export_urdf("EXEC_DEFAULT") == {"FINISHED"}
-        assert scene.artgs.export.status == "DONE", scene.artgs.export.text
-        box = read_crop(out)
-        np.testing.assert_allclose(box.center, (lo + hi) / 2, atol=1e-6)
-        np.testing.assert_allclose(box.half_size, (hi - lo) / 2 + 0.05, atol=1e-6)
-        np.testing.assert_allclose(box.axes[0], [np.cos(np.deg2rad(3)), np.sin(np.deg2rad(3)), 0],
-                                   atol=1e-6)
-        report = layout.read_report(out)["stages"]["export"]["separation"]
-        assert report["crop"]["outside"] == chair
-        mask = np.load(out / layout.OBJECT_MASK)
-        assert mask.sum() == len(object_pts) and not mask[len(object_pts):].any()
-        # the base mesh stays inside the box (a voxel or two of closing surface aside)
-        base = trimesh.load(out / "parts" / "base.obj", force="mesh")
-        grown = CropBox(box.center, box.axes, box.half_size + 0.03)
-        assert grown.contains(np.asarray(base.vertices)).all()
-        # deleting the box removes the crop the add-on wrote
-        bpy.data.objects.remove(obj)
-        from artgs.artgs_addon.crop_box import sync_crop
-        assert sync_crop(scene, out) is None and not (out / layout.CROP).exists()
-    finally:
-        if mine:
-            artgs.unregister()
+    scene = bpy.context.scene
+    scene.artgs.output_dir = str(out)
+    # the engine's export reads the capture (for its masks: this one has them, so the crop
+    # box alone separates the object)
+    scene.artgs.capture_dir = str(generate_capture(tmp_path / "cap", "cabinet", 0, width=64,
+                                                   height=48))
+    assert bpy.ops.artgs.add_crop_box() == {"FINISHED"}
+    obj = scene.objects[CROP_BOX]
+    assert obj.type == "EMPTY" and obj.empty_display_type == "CUBE"
+    # around the object (its Gaussians + 3 cm), turned 3 degrees about z
+    lo, hi = object_pts.min(0) - 0.03, object_pts.max(0) + 0.03
+    obj.location = tuple((lo + hi) / 2)
+    obj.rotation_euler = (0.0, 0.0, np.deg2rad(3.0))
+    obj.scale = tuple((hi - lo) / 2 + 0.05)
+    bpy.context.view_layer.update()
+    assert bpy.ops.artgs.export_urdf("EXEC_DEFAULT") == {"FINISHED"}
+    assert scene.artgs.export.status == "DONE", scene.artgs.export.text
+    box = read_crop(out)
+    np.testing.assert_allclose(box.center, (lo + hi) / 2, atol=1e-6)
+    np.testing.assert_allclose(box.half_size, (hi - lo) / 2 + 0.05, atol=1e-6)
+    np.testing.assert_allclose(box.axes[0], [np.cos(np.deg2rad(3)), np.sin(np.deg2rad(3)), 0],
+                               atol=1e-6)
+    report = layout.read_report(out)["stages"]["export"]["separation"]
+    assert report["crop"]["outside"] == chair
+    mask = np.load(out / layout.OBJECT_MASK)
+    assert mask.sum() == len(object_pts) and not mask[len(object_pts):].any()
+    # the base mesh stays inside the box (a voxel or two of closing surface aside)
+    base = trimesh.load(out / "parts" / "base.obj", force="mesh")
+    grown = CropBox(box.center, box.axes, box.half_size + 0.03)
+    assert grown.contains(np.asarray(base.vertices)).all()
+    # deleting the box removes the crop the add-on wrote
+    bpy.data.objects.remove(obj)
+    assert sync_crop(scene, out) is None and not (out / layout.CROP).exists()
