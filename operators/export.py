@@ -10,6 +10,7 @@ from bpy.props import EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from ..artgs_addon.armature import find_armature
+from ..artgs_addon.crop_box import add_crop_box, sync_crop
 from ..artgs_addon.urdf_import import URDF_KEY, import_urdf, write_edited_urdf
 from ..artgs_addon.worker import WorkerResult
 from ..core.model import layout
@@ -46,6 +47,7 @@ class ARTGS_OT_export_urdf(WorkerOperator, bpy.types.Operator):
 
     def worker_args(self, context: bpy.types.Context) -> list[str]:
         settings = context.scene.artgs
+        sync_crop(context.scene, settings.output_path)          # the crop box -> OUT/crop.json
         args = [str(settings.output_path), "--face-budget", str(self.face_budget)]
         if settings.capture_path is not None and (settings.capture_path / "transforms.json").is_file():
             args += ["--capture", str(settings.capture_path)]
@@ -124,6 +126,24 @@ class ARTGS_OT_show_check_frames(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class ARTGS_OT_add_crop_box(bpy.types.Operator):
+    """Add (or select) the crop box: an Empty shown as a cube; place and scale it around the
+    object. Export keeps only what lies inside (written to OUT/crop.json when a stage runs)"""
+
+    bl_idname = "artgs.add_crop_box"
+    bl_label = "Add Crop Box"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        return getattr(context.scene, "artgs", None) is not None
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        obj = add_crop_box(context)
+        self.report({"INFO"}, f"'{obj.name}': place and scale it around the object")
+        return {"FINISHED"}
+
+
 class ARTGS_OT_import_urdf(bpy.types.Operator, ImportHelper):
     """Import a URDF (ours, PyBullet's examples, PartNet-Mobility's mobility.urdf) as part meshes
     parented to an editable joint armature"""
@@ -170,4 +190,4 @@ class ARTGS_OT_write_edited_urdf(bpy.types.Operator, ExportHelper):
 
 
 CLASSES = (ARTGS_OT_export_urdf, ARTGS_OT_check_manipulation, ARTGS_OT_show_check_frames,
-           ARTGS_OT_import_urdf, ARTGS_OT_write_edited_urdf)
+           ARTGS_OT_add_crop_box, ARTGS_OT_import_urdf, ARTGS_OT_write_edited_urdf)

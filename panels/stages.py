@@ -26,6 +26,7 @@ class ARTGS_PT_export(ArtgsPanel, bpy.types.Panel):
 
     def draw(self, context: bpy.types.Context) -> None:
         col = self.layout.column()
+        col.operator("artgs.add_crop_box", icon="CUBE")
         col.operator("artgs.export_urdf", icon="EXPORT")
         draw_state(col, context.scene.artgs.export)
         draw_figures(col, context, "export")

@@ -18,6 +18,7 @@ PARTS_DIR = "parts"
 URDF = "model.urdf"
 REPORT = "report.json"
 OBJECT_MASK = "object_mask.npy"   # bool per splat.ply Gaussian: part of the object (export)
+CROP = "crop.json"                # the user's crop box around the object (core/model/crop.py)
 CHECK_STRIP = "check.png"         # frames of the manipulation check, one row per joint
 
 

@@ -5,15 +5,19 @@ One episode per joint, in its own ``DIRECT`` client:
 
 - the object URDF is loaded with a fixed base; the operated joint is free, the others are held
   closed; each part weighs ``PART_MASS`` so the outcome measures the joint, not the payload;
-- the robot (``pybullet_data``) stands on a pedestal in front of the handle, facing along the
-  approach direction; its base is the candidate place from which inverse kinematics reaches the
-  whole planned handle path best;
+- the robot (``pybullet_data``) stands in front of the handle, facing along the approach
+  direction; its base is the candidate place that reaches the grasp and from which inverse
+  kinematics, followed along the planned handle path (each pose seeded from the last, as the arm
+  moves), stays closest to the path and away from joint limits; the arm's pose halfway along that
+  path is the posture the null space pulls towards;
 - it starts at the grasp pose and holds the handle: a point-to-point constraint between the
   gripper's grasp point and the part, limited to ``GRASP_FORCE`` (a parallel gripper's holding
   force times friction 1); collisions between robot and object are off;
 - the gripper follows the handle path of the PLANNED joint (minimum-jerk in the joint value) under
-  Cartesian impedance control, tau = J^T (K (x_d - x) - D xdot) + g(q) (gravity compensation
-  from inverse dynamics), plus joint damping in the null space;
+  Cartesian impedance control in operational-space form, tau = J^T Lambda (K (x_d - x) - D xdot)
+  + C(q, qdot) qdot + g(q) (gravity and Coriolis from PyBullet's inverse dynamics) plus a null-space
+  posture term (``_Robot.impedance_step``); the URDF's joint damping is switched off (the
+  controller damps; an explicit damping of 1 N m s on xarm6's 0.1 kg wrist is unstable at 240 Hz);
 - the grasp is lost when the gripper and the grasped point drift ``LOST_DISTANCE`` apart;
   success when the TRUE joint (the URDF's) reaches the target of metrics.md with the grasp held.
 """
@@ -33,10 +37,15 @@ DT = 1.0 / 240.0
 GRASP_FORCE = 70.0          # N
 LOST_DISTANCE = 0.02        # m
 PART_MASS = 1.0             # kg
-K_POS, D_POS = 1500.0, 40.0
-K_ROT, D_ROT = 15.0, 0.3
-NULL_STIFFNESS, NULL_DAMPING = 2.0, 0.5
+# position stiffness in N/m: 70 N of grasp force give way at 2.3 cm (LOST_DISTANCE is 2 cm);
+# damping and orientation gains per unit task mass: K = w^2, D = 2 w, w well below the step rate
+# (w DT < 0.3) so the explicit control step stays stable
+K_POS, D_POS = 3000.0, 2 * 60.0
+K_ROT, D_ROT = 30.0 ** 2, 2 * 30.0
+NULL_STIFFNESS, NULL_DAMPING = 10.0, 2 * 10.0 ** 0.5
+LAMBDA_DAMPING = 1e-4       # regularises (J M^-1 J^T) near singular poses
 OVERSHOOT = 1.15            # the plan goes this much past the target
+REHEARSALS = 2              # robot placements rehearsed along the plan (see _place_robot)
 
 
 @dataclass(frozen=True)
@@ -149,12 +158,19 @@ def run_episode(object_urdf: str, task: Task, robot: str = "franka_panda", frame
                                   if task.planned.limit != (0.0, 0.0) else 1.0)
         plan_end = plan_sign * OVERSHOOT * abs(target)
         grasp_pose = _grasp_pose(task.handle, task.approach)
-        path = [joint_transform(task.planned.type, task.planned.axis, task.planned.origin,
-                                plan_end * s) @ grasp_pose for s in np.linspace(0, 1, 7)]
-        bot = _place_robot(model, path, client, pybullet_data.getDataPath())
+        duration = 3.0
+        steps, hold = int(duration / DT), int(1.0 / DT)
+        goals = [joint_transform(task.planned.type, task.planned.axis, task.planned.origin,
+                                 plan_end * _min_jerk(min(k / steps, 1.0))) @ grasp_pose
+                 for k in range(steps + hold)]
+        # inertia from the links' shapes, not the files: PyBullet rejects xarm6's inertia
+        # tensors ("bad inertia tensor", set to zero), which makes its mass matrix singular
+        body = p.loadURDF(os.path.join(pybullet_data.getDataPath(), model.urdf),
+                          useFixedBase=True, physicsClientId=client)
         for i in range(-1, p.getNumJoints(obj, physicsClientId=client)):
-            for j in range(-1, p.getNumJoints(bot.body, physicsClientId=client)):
-                p.setCollisionFilterPair(obj, bot.body, i, j, 0, physicsClientId=client)
+            for j in range(-1, p.getNumJoints(body, physicsClientId=client)):
+                p.setCollisionFilterPair(obj, body, i, j, 0, physicsClientId=client)
+        bot = _place_robot(model, body, goals[:steps + 1], client)
         reach = float(np.linalg.norm(bot.ee_pose()[:3, 3] - grasp_pose[:3, 3]))
         if reach > 0.02:
             return Outcome(task.true_joint, False, 0.0, target, False,
@@ -166,16 +182,10 @@ def run_episode(object_urdf: str, task: Task, robot: str = "franka_panda", frame
                                  bot.ee_com_offset, local, physicsClientId=client)
         p.changeConstraint(cid, maxForce=GRASP_FORCE, physicsClientId=client)
 
-        duration = 3.0
-        steps, hold = int(duration / DT), int(1.0 / DT)
         shots = set(np.linspace(0, steps + hold - 1, frames).round().astype(int).tolist())
-        camera = _camera(task.handle, task.approach, path[-1][:3, 3], size)
+        camera = _camera(task.handle, task.approach, goals[-1][:3, 3], size)
         images, lost, worst, reached = [], False, 0.0, 0.0
-        for k in range(steps + hold):
-            s = min(k / steps, 1.0)
-            value = plan_end * (10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5)
-            goal = joint_transform(task.planned.type, task.planned.axis, task.planned.origin,
-                                   value) @ grasp_pose
+        for k, goal in enumerate(goals):
             worst = max(worst, bot.impedance_step(goal))
             p.stepSimulation(physicsClientId=client)
             reached = p.getJointState(obj, link, physicsClientId=client)[0]
@@ -211,6 +221,7 @@ class _Robot:
             names[info[1].decode()] = i
             if info[2] != p.JOINT_FIXED:
                 self.movable.append(i)
+                p.changeDynamics(body, i, jointDamping=0.0, physicsClientId=client)
         self.ee = names[model.ee_link]
         self.arm = self.movable[:len(model.rest)]
         info = [p.getJointInfo(body, i, physicsClientId=client) for i in self.movable]
@@ -230,10 +241,10 @@ class _Robot:
         for i in self.fingers:
             self.p.resetJointState(self.body, i, 0.0, physicsClientId=self.client)
 
-    def ik(self, pose: np.ndarray) -> list[float]:
-        """Arm joint values reaching ``pose`` (seeded from the rest pose)."""
+    def ik(self, pose: np.ndarray, seed=None) -> list[float]:
+        """Arm joint values reaching ``pose``, seeded from ``seed`` (default: the rest pose)."""
         p = self.p
-        self.set_arm(self.model.rest)
+        self.set_arm(self.model.rest if seed is None else seed)
         quat = _quat(pose[:3, :3])
         for _ in range(3):
             sol = p.calculateInverseKinematics(
@@ -264,8 +275,17 @@ class _Robot:
                                         physicsClientId=self.client)
 
     def impedance_step(self, goal: np.ndarray) -> float:
-        """Apply tau = J^T (K e - D v) + g(q) for one step; returns the position error."""
-        p, c = self.p, self.client
+        """Apply one step of Cartesian impedance control in the operational-space form,
+        tau = J^T Lambda (K e - D v) + C(q, qd) qd + g(q) + null-space posture, and return the
+        position error.
+
+        Lambda = (J M^-1 J^T)^-1 (PyBullet's mass matrix) scales damping and orientation gains
+        to the arm's task-space inertia, so one set of gains is stable for every robot and pose
+        (xarm6's last link weighs 0.1 kg; a fixed rotational damping makes it oscillate at the
+        step rate); the position stiffness is physical (N/m), the same for every robot. Gravity and Coriolis come
+        from PyBullet's inverse dynamics at the current velocity; the null-space term (the
+        dynamically consistent projector) pulls a redundant arm towards its rest pose."""
+        p, c, n = self.p, self.client, len(self.arm)
         states = p.getJointStates(self.body, self.movable, physicsClientId=c)
         q = [s[0] for s in states]
         qd = [s[1] for s in states]
@@ -276,63 +296,117 @@ class _Robot:
         v, w = np.array(ls[6]), np.array(ls[7])
         e_pos = goal[:3, 3] - x
         e_rot = _rotvec(goal[:3, :3] @ R.T)
-        J_lin, J_ang = p.calculateJacobian(self.body, self.ee, self.ee_com_offset, q,
-                                           [0.0] * len(q), [0.0] * len(q), physicsClientId=c)
+        zeros = [0.0] * len(q)
+        J_lin, J_ang = p.calculateJacobian(self.body, self.ee, self.ee_com_offset, q, zeros,
+                                           zeros, physicsClientId=c)
         # PyBullet gives the Jacobian in the base frame: rotate it into the world
         Rb = np.array(p.getMatrixFromQuaternion(
             p.getBasePositionAndOrientation(self.body, physicsClientId=c)[1])).reshape(3, 3)
-        J = np.vstack([Rb @ np.array(J_lin), Rb @ np.array(J_ang)])[:, :len(self.arm)]
-        wrench = np.concatenate([K_POS * e_pos - D_POS * v, K_ROT * e_rot - D_ROT * w])
-        gravity = np.array(p.calculateInverseDynamics(self.body, q, [0.0] * len(q),
-                                                      [0.0] * len(q), physicsClientId=c))
-        qd_arm = np.array(qd[:len(self.arm)])
-        null = np.eye(len(self.arm)) - J.T @ np.linalg.pinv(J.T)
-        rest = np.array(self.rest[:len(self.arm)]) - np.array(q[:len(self.arm)])
-        tau = J.T @ wrench + gravity[:len(self.arm)] + null @ (NULL_STIFFNESS * rest
-                                                              - NULL_DAMPING * qd_arm)
+        J = np.vstack([Rb @ np.array(J_lin), Rb @ np.array(J_ang)])[:, :n]
+        M = np.array(p.calculateMassMatrix(self.body, q, physicsClientId=c))[:n, :n]
+        M_inv = np.linalg.inv(M)
+        Lam = np.linalg.inv(J @ M_inv @ J.T + LAMBDA_DAMPING * np.eye(6))
+        # stiffness in N/m (how hard the gripper insists on the plan, against the grasp's force
+        # limit, is what decides a wrong plan); damping and orientation per unit task mass
+        spring = np.concatenate([K_POS * e_pos, np.zeros(3)])
+        accel = np.concatenate([-D_POS * v, K_ROT * e_rot - D_ROT * w])
+        bias = np.array(p.calculateInverseDynamics(self.body, q, qd, zeros, physicsClientId=c))
+        qd_arm = np.array(qd[:n])
+        J_bar = M_inv @ J.T @ Lam
+        null = np.eye(n) - J.T @ J_bar.T
+        rest = np.array(self.rest[:n]) - np.array(q[:n])
+        posture = M @ (NULL_STIFFNESS * rest - NULL_DAMPING * qd_arm)
+        tau = J.T @ (spring + Lam @ accel) + bias[:n] + null @ posture
         p.setJointMotorControlArray(self.body, self.arm, p.TORQUE_CONTROL, forces=tau.tolist(),
                                     physicsClientId=c)
         return float(np.linalg.norm(e_pos))
 
 
-def _place_robot(model: RobotModel, path: list[np.ndarray], client: int, data: str) -> _Robot:
-    """The robot at the candidate base pose from which IK reaches the planned path best."""
+def _min_jerk(s: float) -> float:
+    return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
+
+
+def _place_robot(model: RobotModel, body: int, goals: list[np.ndarray], client: int) -> _Robot:
+    """The robot at the candidate base that follows the planned gripper path ``goals`` (one pose
+    per control step) best.
+
+    Candidates in front of the path are ranked by inverse kinematics along the path (seeded from
+    the rest pose, and again each pose from the last), first by reaching the grasp, then by the
+    worst miss and joint-limit margin; the best ``REHEARSALS`` then rehearse the whole path under
+    the impedance controller without the object (collisions with it are off) and the one that
+    tracks it best is kept. IK alone ranks a pose by where the arm could be, not by where the
+    controller takes it near joint limits, so the rehearsal decides. Only the plan is used: the
+    true joint plays no part in where the robot stands."""
     import pybullet as p
 
+    path = goals[::max(1, len(goals) // 6)] + [goals[-1]]
     start, end = path[0][:3, 3], path[-1][:3, 3]
     approach = path[0][:3, 2].copy()
     approach[2] = 0.0
     approach = approach / max(np.linalg.norm(approach), 1e-9)
     side = np.cross([0.0, 0.0, 1.0], approach)
     mid = (start + end) / 2
-    yaw = math.atan2(approach[1], approach[0])
-    body = p.loadURDF(os.path.join(data, model.urdf), useFixedBase=True,
-                      physicsClientId=client,
-                      flags=p.URDF_USE_INERTIA_FROM_FILE)
-    best, best_err = None, np.inf
-    for d in (0.45, 0.6, 0.75):
+    orn = p.getQuaternionFromEuler([0, 0, math.atan2(approach[1], approach[0])])
+    ranked = []
+    for d in (0.35, 0.5, 0.65, 0.8):
         for lateral in (-0.2, 0.0, 0.2):
-            for dz in (-0.5, -0.3):
+            for dz in (-0.6, -0.4, -0.2):
                 base = mid - d * approach + lateral * side
                 base[2] = mid[2] + dz
-                p.resetBasePositionAndOrientation(body, base.tolist(),
-                                                  p.getQuaternionFromEuler([0, 0, yaw]),
+                p.resetBasePositionAndOrientation(body, base.tolist(), orn,
                                                   physicsClientId=client)
                 robot = _Robot(model, body, base, client)
-                err = 0.0
-                for pose in path[::2]:
-                    q = np.array(robot.ik(pose))
-                    e = robot.ee_pose()
-                    margin = np.minimum(q - robot.lower[:len(q)], robot.upper[:len(q)] - q).min()
-                    err = max(err, float(np.linalg.norm(e[:3, 3] - pose[:3, 3]))
-                              + 0.05 * float(np.linalg.norm(_rotvec(pose[:3, :3] @ e[:3, :3].T)))
-                              + 0.05 * max(0.0, 0.3 - float(margin)))
-                if err < best_err:
-                    best, best_err = base, err
-    p.resetBasePositionAndOrientation(body, best.tolist(), p.getQuaternionFromEuler([0, 0, yaw]),
+                for sequential in (False, True):
+                    ranked.append((*_ik_score(robot, path, sequential), base))
+    ranked.sort(key=lambda r: r[:2])
+    saved = p.saveState(physicsClientId=client)
+    best, best_err = None, np.inf
+    for _, _, qs, base in ranked[:REHEARSALS]:
+        p.restoreState(saved, physicsClientId=client)
+        robot = _start(model, body, base, qs, client)
+        err = 0.0
+        for goal in goals:
+            err = max(err, robot.impedance_step(goal))
+            p.stepSimulation(physicsClientId=client)
+        if err < best_err:
+            best, best_err = (base, qs), err
+    p.restoreState(saved, physicsClientId=client)
+    p.removeState(saved, physicsClientId=client)
+    return _start(model, body, best[0], best[1], client)
+
+
+def _ik_score(robot: "_Robot", path: list[np.ndarray], sequential: bool) -> tuple:
+    """(misses the grasp, worst miss + joint-limit penalty, joint values) along ``path``."""
+    err, q, qs, misses_grasp = 0.0, None, [], False
+    for pose in path:
+        q = np.array(robot.ik(pose, q if sequential else None))
+        qs.append(q)
+        e = robot.ee_pose()
+        miss = float(np.linalg.norm(e[:3, 3] - pose[:3, 3]))
+        if len(qs) == 1:
+            misses_grasp = miss > 0.01
+        margin = np.minimum(q - robot.lower[:len(q)], robot.upper[:len(q)] - q).min()
+        err = max(err, miss + 0.05 * float(np.linalg.norm(_rotvec(pose[:3, :3] @ e[:3, :3].T)))
+                  + 0.05 * max(0.0, 0.3 - float(margin)))
+    return misses_grasp, err, qs
+
+
+def _start(model: RobotModel, body: int, base: np.ndarray, qs: list[np.ndarray],
+           client: int) -> "_Robot":
+    """The robot at ``base``, at the grasp (``qs[0]``), its null-space posture the arm's pose
+    halfway along the path (away from the joint limits the ends may approach), motors off."""
+    import pybullet as p
+
+    p.resetBasePositionAndOrientation(body, base.tolist(),
+                                      p.getBasePositionAndOrientation(body,
+                                                                      physicsClientId=client)[1],
                                       physicsClientId=client)
-    robot = _Robot(model, body, best, client)
-    robot.set_arm(robot.ik(path[0]))
+    robot = _Robot(model, body, base, client)
+    robot.rest[:len(robot.arm)] = qs[len(qs) // 2].tolist()
+    robot.set_arm(qs[0])
+    for i in robot.movable:
+        p.resetJointState(body, i, p.getJointState(body, i, physicsClientId=client)[0], 0.0,
+                          physicsClientId=client)
     robot.release_motors()
     return robot
 

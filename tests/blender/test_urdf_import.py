@@ -134,6 +134,7 @@ def test_check_operator_runs_in_the_engine_and_loads_the_strip(ctx, tmp_path):
     assert bpy.ops.artgs.check_manipulation("EXEC_DEFAULT") == {"FINISHED"}
     state = ctx.scene.artgs.check
     assert state.status == "DONE" and "opened 2/2" in state.text, state.text
+    assert ctx.scene.artgs.export.status == "NOT_RUN"      # the check has its own state
     image = bpy.data.images[STRIP_IMAGE]
     assert tuple(image.size) == (6 * 160, 2 * 120)
     # Import URDF through its operator

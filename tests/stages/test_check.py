@@ -26,14 +26,18 @@ def cabinet(tmp_path_factory):
     return out
 
 
-def test_true_joints_open_every_part(cabinet):
-    figures = run_stage("check", cabinet, CheckOptions(urdf=str(cabinet / "gt.urdf"), frames=3),
-                        Progress("quiet"))
+ROBOTS = ["franka_panda", "xarm6"]
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_true_joints_open_every_part(cabinet, robot):
+    figures = run_stage("check", cabinet, CheckOptions(urdf=str(cabinet / "gt.urdf"), frames=3,
+                                                       robot=robot), Progress("quiet"))
     art = read_articulation(cabinet / layout.ARTICULATION)
     assert set(figures["joints"]) == {j.name for j in art.joints}
     for j in art.joints:
         r = figures["joints"][j.name]
-        assert r["success"] and not r["grasp_lost"], (j.name, r)
+        assert r["success"] and not r["grasp_lost"], (robot, j.name, r)
         assert r["reached"] >= target_value(j.type, j.limit) - 1e-3
     strip = cv2.imread(str(cabinet / layout.CHECK_STRIP))
     assert strip.shape[0] == 2 * 120 and strip.shape[1] == 3 * 160
@@ -41,7 +45,8 @@ def test_true_joints_open_every_part(cabinet):
     assert report["stages"]["check"]["success_rate"] == 1.0
 
 
-def test_an_axis_15_degrees_off_fails(cabinet, tmp_path):
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_an_axis_15_degrees_off_fails(cabinet, tmp_path, robot):
     art = read_articulation(cabinet / layout.ARTICULATION)
     for j in art.joints:            # tilt each axis by 15 degrees about a horizontal direction
         tilt = np.cross(j.axis, [0.0, 0.0, 1.0])
@@ -50,7 +55,8 @@ def test_an_axis_15_degrees_off_fails(cabinet, tmp_path):
     out = tmp_path / "off"
     out.mkdir()
     write_articulation(out / layout.PROPOSALS, art)
-    figures = run_stage("check", out, CheckOptions(urdf=str(cabinet / "gt.urdf"), frames=2),
-                        Progress("quiet"))
+    figures = run_stage("check", out, CheckOptions(urdf=str(cabinet / "gt.urdf"), frames=2,
+                                                   robot=robot), Progress("quiet"))
     for name, r in figures["joints"].items():
-        assert not r["success"], (name, r)
+        # it fails because the plan leaves the true path, not because the handle was unreachable
+        assert not r["success"] and r["grasp_lost"], (robot, name, r)

@@ -28,6 +28,7 @@ from ...geometry.parts import assign_parts
 from ...geometry.separate import separate_object
 from ...model import atomic, layout
 from ...model.capture import Capture
+from ...model.crop import CropBox, read_crop
 from ...model.errors import InputError
 from ...model.joints import Joint, read_articulation
 from ...model.ply import SplatArrays, read_ply
@@ -59,8 +60,11 @@ def run(out: Path, capture: Capture | None, options: ExportOptions, progress: Pr
     joints_path = layout.joints_file(out)
     articulation = read_articulation(joints_path)
     joints = ordered_joints(articulation.joints, joints_path)
+    crop = read_crop(out)
     labels, label_source = part_labels(out, splat, joints)
     separation = object_mask(out, splat, joints, capture, options)
+    if crop is not None:
+        separation = crop_mask(out, splat, crop, separation)
     labels = np.where(separation["mask"], labels, -1)
 
     frames = link_frames(joints)
@@ -177,6 +181,22 @@ def object_mask(out: Path, splat: SplatArrays, joints: list[Joint], capture: Cap
               "floor": None if sep.floor is None else {"normal": sep.floor[0].tolist(),
                                                        "offset": sep.floor[1]}}
     return {"mask": sep.mask, "report": report}
+
+
+def crop_mask(out: Path, splat: SplatArrays, crop: CropBox, separation: dict[str, Any]
+              ) -> dict[str, Any]:
+    """The separation restricted to the user's crop box (OUT/crop.json); the combined mask is
+    written to object_mask.npy."""
+    inside = crop.contains(splat.means)
+    mask = separation["mask"] & inside
+    if not mask.any():
+        raise InputError(out / layout.CROP, f"no Gaussian of {layout.SPLAT} lies inside the crop box",
+                         field="center")
+    atomic.write_bytes(out / layout.OBJECT_MASK, _npy(mask))
+    report = dict(separation["report"], crop={**crop.to_dict(), "file": layout.CROP,
+                                              "outside": int((~inside).sum())},
+                  mask_file=layout.OBJECT_MASK, object_gaussians=int(mask.sum()))
+    return {"mask": mask, "report": report}
 
 
 def link_mesh(name: str, frame: np.ndarray, splat: SplatArrays, members: np.ndarray,
