@@ -36,51 +36,65 @@ class FitConfig:
     lr_origins: float = 0.004          # x object size
     lr_states: float = 0.01
     lr_logits: float = 0.1
+    lr_cameras: float = 0.001          # camera corrections (rad; object sizes)
+    lambda_camera: float = 1e-3        # their prior, in units of 1 degree and 1 % of the size
     lr_final: float = 0.05             # learning rates decay exponentially to this fraction
     widen: float = 10.0                # robust sigmas at the start of the coarse phase, x
+    part_pixels: float = 0.25          # last fit on the moving parts' pixels, x the main steps
     coarse: float = 0.4                # fraction of the first fit's steps at the coarsest level
+    plateau: float = 1e-3              # full-resolution steps: mean relative loss improvement
+    #                                    per revisit of a time below which the rates drop
+    drop: float = 0.25                 # ... by this factor; the fit stops below ``lr_final``
     backend: str = "auto"
 
 
 def frame_loss(model: ArticulatedSplat, frames: FrameSet, level: int, i: int,
-               cfg: FitConfig, widen: float = 1.0) -> torch.Tensor:
+               cfg: FitConfig, widen: float = 1.0, parts: bool = False) -> torch.Tensor:
     """Image loss of frame ``i`` at pyramid ``level``; ``widen`` scales the robust loss's
-    sigmas (large: L1-like, every pixel pulls)."""
+    sigmas (large: L1-like, every pixel pulls); ``parts``: only the pixels the moving parts
+    cover (:meth:`ArticulatedSplat.footprint`)."""
     v = frames.levels[level][i]
-    r = model.render(v, frames.time_index[i], cfg.backend)
+    ti = frames.time_index[i]
+    r = model.render(v, ti, cfg.backend)
+    region = model.footprint(v, ti, cfg.backend) if parts else None
     return robust_image_loss(r, v, depth_unit=0.01 * model.size, sigma_rgb=cfg.sigma_rgb * widen,
                              sigma_depth=cfg.sigma_depth * widen,
-                             sigma_alpha=cfg.sigma_alpha * widen, lambda_ssim=cfg.lambda_ssim)
+                             sigma_alpha=cfg.sigma_alpha * widen, lambda_ssim=cfg.lambda_ssim,
+                             region=region)
 
 
 @torch.no_grad()
 def evaluate(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, level: int = 0,
-             subset: list[int] | None = None) -> np.ndarray:
-    """Image loss of every frame (or ``subset``) at ``level``, no regularisers."""
+             subset: list[int] | None = None, parts: bool = False) -> np.ndarray:
+    """Image loss of every frame (or ``subset``) at ``level``, no regularisers (``parts``: on
+    the moving parts' pixels, :func:`frame_loss`)."""
     ids = range(len(frames.time_index)) if subset is None else subset
-    return np.array([float(frame_loss(model, frames, level, i, cfg)) for i in ids])
+    return np.array([float(frame_loss(model, frames, level, i, cfg, parts=parts)) for i in ids])
 
 
 def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         rng: np.random.Generator, *, free: list[bool] | None = None,
         times: list[int] | None = None, prior: torch.Tensor | None = None,
         tick: Callable[[int, float], None] | None = None, coarse: float = 0.0,
-        lr_scale: float = 1.0) -> float:
+        lr_scale: float = 1.0, parts: bool = False) -> float:
     """Run ``steps`` Adam steps; returns the mean loss of the last quarter of them.
 
-    ``free``: joints that move (default all); ``times``: time indices to sample (default all);
+    ``free``: joints that move (default all; the camera corrections, when learnt, move only
+    then); ``times``: time indices to sample (default all);
     ``prior``: per-joint strength of the pull towards the start; ``tick(step, loss)`` is called
     every step (progress and cancel); ``coarse``: fraction of the steps at the coarsest level;
     ``lr_scale``: multiplies the learning rates (refining phases start below the first fit's
     rates: Adam's steps are about the learning rate whatever the gradient, so a converged
-    solution restarted at full rate would wander off).
+    solution restarted at full rate would wander off); ``parts``: the loss on the moving parts'
+    pixels only (hardened models, :func:`frame_loss`).
     """
     if steps <= 0 or model.k == 0:
         return float("nan")
     dev = model.axes.device
     size = model.size
     lrs = {"axes": cfg.lr_axes * lr_scale, "origins": cfg.lr_origins * size * lr_scale,
-           "states": cfg.lr_states * lr_scale, "logits": cfg.lr_logits}
+           "states": cfg.lr_states * lr_scale, "logits": cfg.lr_logits,
+           "cameras": cfg.lr_cameras * lr_scale}
     params = model.params()
     opt = Adam(params, {k: lrs[k] for k in params}, eps=1e-12)
     model.load(opt.params)
@@ -88,25 +102,33 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         torch.tensor(free, dtype=torch.float32, device=dev)
     pool = list(range(len(frames.times))) if times is None else list(times)
     coarse_level = len(frames.levels) - 1
+    n_coarse = int(coarse * steps)
+    rate = 1.0
+    plateau = Plateau(len(pool), cfg)
     losses: list[float] = []
     for step in range(steps):
-        decay = cfg.lr_final ** (step / steps)
+        in_coarse = step < n_coarse
+        if in_coarse:  # a fixed schedule while the loss itself changes (level, robustness)
+            rate = cfg.lr_final ** (step / steps)
         for name in opt.lrs:
-            opt.lrs[name] = lrs[name] * decay
-        in_coarse = step < coarse * steps
+            opt.lrs[name] = lrs[name] * rate
         level = coarse_level if in_coarse else 0
         # graduated robustness: the coarse phase starts L1-like (wide basin) and tightens
-        widen = cfg.widen ** (1 - step / (coarse * steps)) if in_coarse else 1.0
+        widen = cfg.widen ** (1 - step / n_coarse) if in_coarse else 1.0
         ti = int(rng.choice(pool))
         ids = frames.at_time(ti)
-        loss = sum(frame_loss(model, frames, level, i, cfg, widen) for i in ids) / max(len(ids), 1)
+        loss = sum(frame_loss(model, frames, level, i, cfg, widen, parts) for i in ids) / max(len(ids), 1)
         smooth, entropy = model.skin_regularisers()
         loss = loss + cfg.lambda_smooth * smooth + cfg.lambda_entropy * entropy \
             + cfg.lambda_temporal * model.temporal()
         if prior is not None and cfg.lambda_prior:
             loss = loss + cfg.lambda_prior * model.prior(prior)
+        if model.refine_cameras:
+            loss = loss + cfg.lambda_camera * model.camera_prior(np.radians(1.0), 0.01)
         opt.zero_grad()
         loss.backward()
+        if free is not None and "cameras" in opt.params:   # one joint's hypothesis: cameras stay
+            opt.params["cameras"].grad = None
         for name in ("axes", "origins", "states"):
             g = opt.params[name].grad
             if g is not None:
@@ -116,9 +138,36 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         losses.append(float(loss.detach()))
         if tick is not None:
             tick(step, losses[-1])
+        if not in_coarse and plateau.stalled(ti, losses[-1]):
+            rate *= cfg.drop
+            if rate < cfg.lr_final:
+                break
     model.load({k: v.detach() for k, v in opt.params.items()})
-    tail = losses[-max(1, steps // 4):]
+    tail = losses[-max(1, len(losses) // 4):]
     return float(np.mean(tail))
+
+
+class Plateau:
+    """Convergence of the full-resolution steps: the loss at each step is compared with the loss
+    at the same time's previous visit (a paired difference: times differ far more from each other
+    than a step changes them); every ``window`` steps (at least the number of times) the mean
+    relative improvement is checked against ``cfg.plateau``."""
+
+    def __init__(self, times: int, cfg: FitConfig) -> None:
+        self.window = max(times, 10)
+        self.tol = cfg.plateau
+        self.last: dict[int, float] = {}
+        self.gains: list[float] = []
+
+    def stalled(self, ti: int, loss: float) -> bool:
+        """Record the loss of time index ``ti``; True at the end of a window without progress."""
+        if ti in self.last:
+            self.gains.append((self.last[ti] - loss) / max(abs(self.last[ti]), 1e-12))
+        self.last[ti] = loss
+        if len(self.gains) < self.window:
+            return False
+        gain, self.gains = float(np.mean(self.gains)), []
+        return gain < self.tol
 
 
 @torch.no_grad()
