@@ -60,7 +60,7 @@ def view_loss(r: RenderOutput, v: View, w: LossWeights, depth_unit: float) -> to
 
 def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb: float = 0.1,
                       sigma_depth: float = 2.0, sigma_alpha: float = 0.5,
-                      lambda_ssim: float = 0.2, region: torch.Tensor | None = None) -> torch.Tensor:
+                      lambda_ssim: float = 0.2) -> torch.Tensor:
     """A loss that pixels no model explains cannot drag (an unseen interior revealed by an open
     door, an arm, a shadow, a flying depth pixel).
 
@@ -70,8 +70,6 @@ def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb:
     pixels that stay wrong whatever the parameters do, so their gradient fades. Summed over the
     image and divided by the object pixels; plus ``λ_ssim (1 − SSIM)`` over the pixels with
     r < 1.
-
-    ``region`` (H,W bool): only these pixels count (divided by their number instead).
 
     Where ``v.occluder_depth`` shows something that is not the object (an arm, a hand), a render
     whose surface there lies behind it (or is empty) is not compared: the object is hidden there.
@@ -85,12 +83,7 @@ def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb:
         occ = v.occluder_depth
         hidden = (occ > 0) & ((r.depth <= 0) | (r.depth > occ - sigma_depth * depth_unit))
         res = torch.where(hidden.detach(), torch.zeros_like(res), res)
-    pixels = v.pixels
-    if region is not None:
-        res = torch.where(region, res, torch.zeros_like(res))
-        pixels = max(int(region.sum()), 1)
-    loss = (res / (1 + res)).sum() / pixels
+    loss = (res / (1 + res)).sum() / v.pixels
     if lambda_ssim:
-        keep = res.detach() < 1 if region is None else region & (res.detach() < 1)
-        loss = loss + lambda_ssim * (1 - ssim(r.rgb, v.rgb, keep.float()))
+        loss = loss + lambda_ssim * (1 - ssim(r.rgb, v.rgb, (res.detach() < 1).float()))
     return loss

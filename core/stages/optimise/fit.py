@@ -40,7 +40,6 @@ class FitConfig:
     lambda_camera: float = 1e-3        # their prior, in units of 1 degree and 1 % of the size
     lr_final: float = 0.05             # learning rates decay exponentially to this fraction
     widen: float = 10.0                # robust sigmas at the start of the coarse phase, x
-    part_pixels: float = 0.25          # last fit on the moving parts' pixels, x the main steps
     coarse: float = 0.4                # fraction of the first fit's steps at the coarsest level
     plateau: float = 1e-3              # full-resolution steps: mean relative loss improvement
     #                                    per revisit of a time below which the rates drop
@@ -49,34 +48,29 @@ class FitConfig:
 
 
 def frame_loss(model: ArticulatedSplat, frames: FrameSet, level: int, i: int,
-               cfg: FitConfig, widen: float = 1.0, parts: bool = False) -> torch.Tensor:
+               cfg: FitConfig, widen: float = 1.0) -> torch.Tensor:
     """Image loss of frame ``i`` at pyramid ``level``; ``widen`` scales the robust loss's
-    sigmas (large: L1-like, every pixel pulls); ``parts``: only the pixels the moving parts
-    cover (:meth:`ArticulatedSplat.footprint`)."""
+    sigmas (large: L1-like, every pixel pulls)."""
     v = frames.levels[level][i]
-    ti = frames.time_index[i]
-    r = model.render(v, ti, cfg.backend)
-    region = model.footprint(v, ti, cfg.backend) if parts else None
+    r = model.render(v, frames.time_index[i], cfg.backend)
     return robust_image_loss(r, v, depth_unit=0.01 * model.size, sigma_rgb=cfg.sigma_rgb * widen,
                              sigma_depth=cfg.sigma_depth * widen,
-                             sigma_alpha=cfg.sigma_alpha * widen, lambda_ssim=cfg.lambda_ssim,
-                             region=region)
+                             sigma_alpha=cfg.sigma_alpha * widen, lambda_ssim=cfg.lambda_ssim)
 
 
 @torch.no_grad()
 def evaluate(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, level: int = 0,
-             subset: list[int] | None = None, parts: bool = False) -> np.ndarray:
-    """Image loss of every frame (or ``subset``) at ``level``, no regularisers (``parts``: on
-    the moving parts' pixels, :func:`frame_loss`)."""
+             subset: list[int] | None = None) -> np.ndarray:
+    """Image loss of every frame (or ``subset``) at ``level``, no regularisers."""
     ids = range(len(frames.time_index)) if subset is None else subset
-    return np.array([float(frame_loss(model, frames, level, i, cfg, parts=parts)) for i in ids])
+    return np.array([float(frame_loss(model, frames, level, i, cfg)) for i in ids])
 
 
 def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         rng: np.random.Generator, *, free: list[bool] | None = None,
         times: list[int] | None = None, prior: torch.Tensor | None = None,
         tick: Callable[[int, float], None] | None = None, coarse: float = 0.0,
-        lr_scale: float = 1.0, parts: bool = False) -> float:
+        lr_scale: float = 1.0) -> float:
     """Run ``steps`` Adam steps; returns the mean loss of the last quarter of them.
 
     ``free``: joints that move (default all; the camera corrections, when learnt, move only
@@ -85,8 +79,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     every step (progress and cancel); ``coarse``: fraction of the steps at the coarsest level;
     ``lr_scale``: multiplies the learning rates (refining phases start below the first fit's
     rates: Adam's steps are about the learning rate whatever the gradient, so a converged
-    solution restarted at full rate would wander off); ``parts``: the loss on the moving parts'
-    pixels only (hardened models, :func:`frame_loss`).
+    solution restarted at full rate would wander off).
     """
     if steps <= 0 or model.k == 0:
         return float("nan")
@@ -117,7 +110,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         widen = cfg.widen ** (1 - step / n_coarse) if in_coarse else 1.0
         ti = int(rng.choice(pool))
         ids = frames.at_time(ti)
-        loss = sum(frame_loss(model, frames, level, i, cfg, widen, parts) for i in ids) / max(len(ids), 1)
+        loss = sum(frame_loss(model, frames, level, i, cfg, widen) for i in ids) / max(len(ids), 1)
         smooth, entropy = model.skin_regularisers()
         loss = loss + cfg.lambda_smooth * smooth + cfg.lambda_entropy * entropy \
             + cfg.lambda_temporal * model.temporal()

@@ -181,18 +181,6 @@ class ArticulatedSplat:
         return rasterize(g.means, g.quats, g.log_scales, g.opacity_logits, g.sh, view.K, view.w2c,
                          view.width, view.height, None, backend)
 
-    @torch.no_grad()
-    def footprint(self, view, ti: int, backend: str = "auto") -> torch.Tensor:
-        """Pixels (H,W bool) the moving parts' Gaussians cover at time index ``ti`` (rendered
-        alone, alpha > 0.5). Hardened models only."""
-        assert self.hard is not None
-        sel = self.hard > 0
-        means, quats = self.posed(ti)
-        s = self.splat
-        r = rasterize(means[sel], quats[sel], s.log_scales[sel], s.opacity_logits[sel], s.sh[sel],
-                      view.K, view.w2c, view.width, view.height, None, backend)
-        return r.alpha > 0.5
-
     # --- regularisers --------------------------------------------------------------------------
     def skin_regularisers(self, sample: int = 2048) -> tuple[torch.Tensor, torch.Tensor]:
         """kNN smoothness (mean L1 difference of neighbours' weights) and mean entropy, estimated

@@ -162,16 +162,13 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     model.hard = None                                       # soft skinning from the box parts
     run.run_fit(max(n // 2, 1), "joints and skinning", 0.25, lr_scale=0.3)
     model.harden()
-    run.run_fit(max(n // 4, 1), "hardened", 0.05, lr_scale=0.1)
+    run.run_fit(max(n // 4, 1), "hardened", 0.1, lr_scale=0.1)
     added: list[str] = []
     if options.parts:
         added = hypotheses.add_missed(run, share=0.05)
     if added and options.types:   # the new parts' types by the same evidence
         evidence.update(hypotheses.select_types(run, share=0.0,
                                                 fixed=[name not in added for name in model.names]))
-    run.done = 0.95
-    run.run_fit(int(n * cfg.part_pixels), "joints on the parts' pixels", 0.05, lr_scale=0.1,
-                parts=True)
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     losses = evaluate(model, frames, cfg)
     result = export(model, frames, joints, losses, evidence, cfg)
