@@ -68,6 +68,20 @@ def _optimise(entry: dict, out: Path) -> list[str]:
     return lines
 
 
+def _export(entry: dict, out: Path) -> list[str]:
+    links = entry.get("links") if isinstance(entry.get("links"), dict) else {}
+    validation = entry.get("validation") if isinstance(entry.get("validation"), dict) else {}
+    checks = [f"{name} {'ok' if r.get('ok') else 'FAILED'}" for name, r in validation.items()
+              if isinstance(r, dict)]
+    lines = [f"{len(links)} links" + (f"; {', '.join(checks)}" if checks else "")] if links else []
+    for name, link in links.items():
+        if isinstance(link, dict):
+            lines.append(f"{name}: {link.get('faces', '?')} faces, "
+                         f"{link.get('collision_hulls', '?')} hulls, "
+                         + (_number(link.get("mass_kg"), "{:.2f} kg") or "? kg"))
+    return lines
+
+
 def _check(entry: dict, out: Path) -> list[str]:
     joints = entry.get("joints") if isinstance(entry.get("joints"), dict) else {}
     opened = sum(bool(r.get("success")) for r in joints.values() if isinstance(r, dict))
@@ -81,7 +95,8 @@ def _check(entry: dict, out: Path) -> list[str]:
 
 #: report.json stage -> what its panel shows.
 FIGURES: dict[str, Callable[[dict, Path], list[str]]] = {
-    "reconstruct": _reconstruct, "propose": _propose, "optimise": _optimise, "check": _check}
+    "reconstruct": _reconstruct, "propose": _propose, "optimise": _optimise, "export": _export,
+    "check": _check}
 
 
 def key_figures(out: Path | None, stage: str) -> list[str]:

@@ -7,8 +7,11 @@ from pathlib import Path
 import bpy
 from bpy.props import EnumProperty, FloatProperty, PointerProperty, StringProperty
 
-#: Pipeline stages shown in the panel, in order.
-STAGES = ("capture", "splat", "bones", "optimise", "export")
+from ..core.model import registry
+
+#: Stages whose state the panels show, in order: importing the capture (Blender only), then the
+#: engine's stages under their registry names (``report.json`` keys, ``artgs`` sub-commands).
+STAGES = ("capture", *(spec.name for spec in registry.STAGES))
 
 STATUSES = (("NOT_RUN", "Not Run", "The stage has not run in this scene"),
             ("RUNNING", "Running", "The stage is running"),
@@ -63,12 +66,6 @@ class ArtgsSceneSettings(bpy.types.PropertyGroup):
     splat_object: PointerProperty(
         name="Splat Preview", type=bpy.types.Object,
         description="The splat preview object (used to size and place the bones)")
-    capture: PointerProperty(type=ArtgsStageState)
-    splat: PointerProperty(type=ArtgsStageState)
-    bones: PointerProperty(type=ArtgsStageState)
-    optimise: PointerProperty(type=ArtgsStageState)
-    export: PointerProperty(type=ArtgsStageState)
-
     @property
     def capture_path(self) -> Path | None:
         """The capture folder as an absolute path, None when not set."""
@@ -83,6 +80,11 @@ class ArtgsSceneSettings(bpy.types.PropertyGroup):
         if name not in STAGES:
             raise KeyError(f"unknown stage {name!r}; expected one of {STAGES}")
         return getattr(self, name)
+
+
+# One state per stage, named as the stage (``settings.stage(name)``).
+ArtgsSceneSettings.__annotations__.update(
+    {name: PointerProperty(type=ArtgsStageState) for name in STAGES})
 
 
 def _abspath(value: str) -> Path | None:

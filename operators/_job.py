@@ -48,6 +48,15 @@ def engine_inputs_ready(context: bpy.types.Context) -> bool:
     return capture is not None and (capture / "transforms.json").is_file()
 
 
+def stage_args(context: bpy.types.Context, iterations: int = 0) -> list[str]:
+    """An engine stage's arguments: OUT, the capture, the preferred device and, when set, the
+    iteration cap."""
+    settings = context.scene.artgs
+    args = [str(settings.output_path), "--capture", str(settings.capture_path),
+            "--device", preferences.get(context).device]
+    return args + (["--iterations", str(iterations)] if iterations else [])
+
+
 def figures_text(figures: dict[str, Any], limit: int = 4) -> str:
     """Key figures as ``name value`` pairs (floats to 4 significant digits)."""
     parts = []

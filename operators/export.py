@@ -66,7 +66,7 @@ class ARTGS_OT_check_manipulation(WorkerOperator, bpy.types.Operator):
     bl_idname = "artgs.check_manipulation"
     bl_label = "Check Manipulation"
     bl_options = {"REGISTER"}
-    stage = "export"
+    stage = "check"
     command = "check"
 
     robot: EnumProperty(name="Robot", items=[(r, r, f"{r} from pybullet_data") for r in ROBOTS])

@@ -15,7 +15,6 @@ import bpy
 import numpy as np
 from bpy.props import IntProperty
 
-from ..artgs_addon import preferences
 from ..artgs_addon.armature import armature_name, build_armature, find_armature, place_joints, \
     read_joints
 from ..artgs_addon.pointcloud import points_modifier_last
@@ -23,7 +22,7 @@ from ..artgs_addon.splat_preview import gaussian_indices, splat_preview_in
 from ..artgs_addon.worker import WorkerResult
 from ..core.model import layout
 from ..core.model.joints import read_articulation
-from ._job import WorkerOperator, engine_inputs_ready
+from ._job import WorkerOperator, engine_inputs_ready, stage_args
 from .propose import object_size
 
 #: Colour attribute of a splat preview showing its part labels (base grey, parts in turn).
@@ -73,12 +72,7 @@ class ARTGS_OT_optimise_joints(WorkerOperator, bpy.types.Operator):
         return None
 
     def worker_args(self, context: bpy.types.Context) -> list[str]:
-        settings = context.scene.artgs
-        args = [str(settings.output_path), "--capture", str(settings.capture_path),
-                "--device", preferences.get(context).device]
-        if self.iterations:
-            args += ["--iterations", str(self.iterations)]
-        return args
+        return stage_args(context, self.iterations)
 
     def on_progress(self, context: bpy.types.Context, figures: dict[str, Any]) -> None:
         joints = figures.get("joints")

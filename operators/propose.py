@@ -12,7 +12,7 @@ from ..artgs_addon.splat_preview import splat_preview_in
 from ..artgs_addon.worker import WorkerResult
 from ..core.model import layout
 from ..core.model.joints import Articulation, read_articulation
-from ._job import WorkerOperator, engine_inputs_ready
+from ._job import WorkerOperator, engine_inputs_ready, stage_args
 
 _PREFS = "Preferences > Add-ons > ArtGS"
 
@@ -34,7 +34,7 @@ class ARTGS_OT_propose_bones(WorkerOperator, bpy.types.Operator):
     bl_idname = "artgs.propose_bones"
     bl_label = "Propose Bones"
     bl_options = {"REGISTER", "UNDO"}
-    stage = "bones"
+    stage = "propose"
     command = "propose"
 
     @classmethod
@@ -55,8 +55,7 @@ class ARTGS_OT_propose_bones(WorkerOperator, bpy.types.Operator):
     def worker_args(self, context: bpy.types.Context) -> list[str]:
         settings = context.scene.artgs
         prefs = preferences.get(context)
-        args = [str(settings.output_path), "--capture", str(settings.capture_path),
-                "--method", settings.proposal_method, "--device", prefs.device]
+        args = stage_args(context) + ["--method", settings.proposal_method]
         if settings.proposal_method == "vlm":
             args += ["--vlm-endpoint", prefs.vlm_endpoint]
             if prefs.vlm_model:

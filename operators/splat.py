@@ -12,7 +12,7 @@ from ..artgs_addon.splat_preview import build_splat_preview, splat_preview_in
 from ..artgs_addon.worker import WorkerResult
 from ..core.model import layout
 from ..core.model.errors import ArtgsError
-from ._job import WorkerOperator, engine_inputs_ready, figures_text, job_running
+from ._job import WorkerOperator, engine_inputs_ready, figures_text, job_running, stage_args
 
 
 def load_splat_preview(context: bpy.types.Context, path: Path) -> str:
@@ -36,7 +36,7 @@ class ARTGS_OT_reconstruct(WorkerOperator, bpy.types.Operator):
     bl_idname = "artgs.reconstruct"
     bl_label = "Reconstruct Splat"
     bl_options = {"REGISTER", "UNDO"}
-    stage = "splat"
+    stage = "reconstruct"
     command = "reconstruct"
 
     iterations: IntProperty(name="Iterations", default=0, min=0,
@@ -47,12 +47,7 @@ class ARTGS_OT_reconstruct(WorkerOperator, bpy.types.Operator):
         return engine_inputs_ready(context)
 
     def worker_args(self, context: bpy.types.Context) -> list[str]:
-        settings = context.scene.artgs
-        args = [str(settings.output_path), "--capture", str(settings.capture_path),
-                "--device", preferences.get(context).device]
-        if self.iterations:
-            args += ["--iterations", str(self.iterations)]
-        return args
+        return stage_args(context, self.iterations)
 
     def finish(self, context: bpy.types.Context, result: WorkerResult) -> str:
         preview = load_splat_preview(context, context.scene.artgs.output_path / layout.SPLAT)
@@ -82,10 +77,10 @@ class ARTGS_OT_import_splat(bpy.types.Operator):
         try:
             summary = load_splat_preview(context, path)
         except (ArtgsError, OSError, ValueError) as exc:
-            settings.splat.set("FAILED", str(exc))
+            settings.reconstruct.set("FAILED", str(exc))
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        settings.splat.set("DONE", summary, 1.0)
+        settings.reconstruct.set("DONE", summary, 1.0)
         self.report({"INFO"}, f"Splat preview: {summary}")
         return {"FINISHED"}
 

@@ -27,7 +27,7 @@ class ARTGS_PT_bones(bpy.types.Panel):
             row = layout.row(align=True)
             row.prop(settings, "proposal_method", text="")
             row.operator("artgs.propose_bones", icon="BONE_DATA")
-            draw_state(layout, settings.bones)
+            draw_state(layout, settings.propose)
             draw_figures(layout, context, "propose")
         row = layout.row(align=True)
         row.operator("artgs.add_joint", icon="ADD", text="Add")

@@ -18,7 +18,7 @@ class ARTGS_PT_splat(ArtgsPanel, bpy.types.Panel):
         col.operator("artgs.import_splat", icon="IMPORT")
         if settings.splat_object is not None:
             col.label(text=f"Preview: {settings.splat_object.name}", icon="POINTCLOUD_DATA")
-        draw_state(col, settings.splat)
+        draw_state(col, settings.reconstruct)
         draw_figures(col, context, "reconstruct")
 
 

@@ -27,10 +27,12 @@ class ARTGS_PT_export(ArtgsPanel, bpy.types.Panel):
     def draw(self, context: bpy.types.Context) -> None:
         col = self.layout.column()
         col.operator("artgs.export_urdf", icon="EXPORT")
+        draw_state(col, context.scene.artgs.export)
+        draw_figures(col, context, "export")
         row = col.row(align=True)
         row.operator("artgs.check_manipulation", icon="CON_ARMATURE")
         row.operator("artgs.show_check_frames", text="", icon="IMAGE_DATA")
-        draw_state(col, context.scene.artgs.export)
+        draw_state(col, context.scene.artgs.check)
         image = bpy.data.images.get("ArtGS Check Frames")
         if image is not None and image.preview is not None:
             col.template_icon(icon_value=image.preview.icon_id, scale=6.0)

@@ -23,8 +23,9 @@ import bpy  # first: with bpy as a module, importing it puts addon_utils on the 
 import addon_utils  # noqa: E402
 
 
-#: Stages after the proposals, in order, as the add-on's operators run them.
-UNTIL = ("bones", "optimise", "export", "check")
+#: Engine stages from the proposals on (the registry's names), in order, as the add-on's
+#: operators run them.
+UNTIL = ("propose", "optimise", "export", "check")
 
 
 def _argv() -> list[str]:
@@ -121,7 +122,7 @@ def run(args: argparse.Namespace, module: str) -> None:
         run_stage("export URDF", bpy.ops.artgs.export_urdf)
     if "check" in steps:
         run_stage("check manipulation", bpy.ops.artgs.check_manipulation)
-    for stage in ("capture", "splat", "bones", "optimise", "export")[:2 + min(len(steps), 3)]:
+    for stage in ("capture", "reconstruct", *steps):
         print(f"  {stage}: {settings.stage(stage).text}")
     contact_sheet(module, capture, out, args.preview_size, args.panels)
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "scene.blend"))

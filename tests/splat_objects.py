@@ -12,7 +12,8 @@ from artgs.core.model.joints import Articulation, write_articulation
 from artgs.core.model.ply import SplatArrays, write_ply
 from artgs.core.render.sh import C0
 from artgs.core.synth.generate import ground_truth
-from artgs.core.synth.objects import ObjectSpec, random_spec
+from artgs.core.synth.layouts import random_spec
+from artgs.core.synth.objects import ObjectSpec
 
 
 def box_surface(T: np.ndarray, half: np.ndarray, spacing: float, rng) -> np.ndarray:

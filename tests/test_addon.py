@@ -252,7 +252,7 @@ def test_import_splat_points_and_colours(scene, tmp_path):
     np.testing.assert_allclose(_attribute(mesh, "Col", 4)[:, :3], srgb_to_linear(srgb), atol=1e-5)
     radius = 2 * np.exp(splats.log_scales.mean(axis=1))
     np.testing.assert_allclose(_attribute(mesh, "radius", 1), radius, rtol=1e-5)
-    assert scene.artgs.splat.status == "DONE" and "2000 Gaussians" in scene.artgs.splat.message
+    assert scene.artgs.reconstruct.status == "DONE" and "2000 Gaussians" in scene.artgs.reconstruct.message
 
     # Capped: a deterministic subset of the same Gaussians; the old preview is replaced.
     preferences.get().preview_cap, scene.artgs.preview_density = 1000, 0.3
@@ -288,10 +288,10 @@ def test_engine_failure_reports_and_leaves_scene(scene, tmp_path, capture):
     before = _scene_state()
     with pytest.raises(RuntimeError) as err:
         bpy.ops.artgs.reconstruct(iterations=2)
-    message = scene.artgs.splat.message
-    assert scene.artgs.splat.status == "FAILED" and str(bad / "transforms.json") in message
+    message = scene.artgs.reconstruct.message
+    assert scene.artgs.reconstruct.status == "FAILED" and str(bad / "transforms.json") in message
     assert message in str(err.value) and "Traceback" not in str(err.value)
-    assert scene.artgs.splat.text == f"failed: {message}"
+    assert scene.artgs.reconstruct.text == f"failed: {message}"
     assert _scene_state() == before and scene.artgs.splat_object is None
 
 
@@ -339,7 +339,7 @@ def test_two_objects_in_one_scene_get_two_armatures(scene, tmp_path, capture):
         _run(bpy.ops.artgs.import_capture)
         _run(bpy.ops.artgs.reconstruct, iterations=2)
         _run(bpy.ops.artgs.propose_bones)
-        assert settings.bones.status == "DONE"
+        assert settings.propose.status == "DONE"
     arms = {o.name: o for o in bpy.data.objects if o.type == "ARMATURE"}
     assert sorted(arms) == ["ArtGS Joints cabinet", "ArtGS Joints drawer"]
     for name, out in outs.items():
@@ -389,7 +389,7 @@ def test_vlm_refused_without_online_access(scene, tmp_path, capture):
     before = _scene_state()
     with pytest.raises(RuntimeError, match="Allow Online Access"):
         bpy.ops.artgs.propose_bones()
-    assert scene.artgs.bones.status == "FAILED" and "Motion" in scene.artgs.bones.message
+    assert scene.artgs.propose.status == "FAILED" and "Motion" in scene.artgs.propose.message
     assert _scene_state() == before and not (tmp_path / "out").exists()
 
 
@@ -398,7 +398,7 @@ def test_wrong_engine_fails_cleanly(scene, tmp_path, capture):
     scene.artgs.capture_dir, scene.artgs.output_dir = str(capture), str(tmp_path / "out")
     with pytest.raises(RuntimeError, match="Engine Python"):
         bpy.ops.artgs.reconstruct()
-    assert scene.artgs.splat.status == "FAILED"
+    assert scene.artgs.reconstruct.status == "FAILED"
 
 
 def test_check_engine_reports_what_it_found(scene, tmp_path):
@@ -444,11 +444,16 @@ def test_stage_panels_show_the_last_runs_key_figures(tmp_path):
     write_articulation(tmp_path / "articulation.json", Articulation([
         Joint("door", "revolute", [0, 0, 1], [0.1, 0, 0], (0, 1.5), confidence=0.9,
               extra={"residual": 0.0111})]))
+    layout.update_report(tmp_path, "export", links={
+        "base": {"faces": 1200, "collision_hulls": 3, "mass_kg": 12.345}},
+        validation={"fk": {"ok": True}, "collision": {"ok": False}, "ok": False})
     layout.update_report(tmp_path, "check", success_rate=0.5, joints={
         "door": {"success": True}, "drawer": {"success": False, "reason": "slipped"}})
     os.utime(tmp_path / "report.json", (later + 5, later + 5))
     assert key_figures(tmp_path, "optimise")[1:] == [
         "residual (mean loss) 0.0123", "door: revolute, residual 0.0111, confidence 0.90"]
+    assert key_figures(tmp_path, "export")[1:] == [
+        "1 links; fk ok, collision FAILED", "base: 1200 faces, 3 hulls, 12.35 kg"]
     assert key_figures(tmp_path, "check")[1:] == [
         "opened 1 of 2 parts", "door: opened", "drawer: not opened: slipped"]
 
@@ -474,8 +479,8 @@ def test_bad_splat_is_reported_in_blender_as_on_the_command_line(scene, tmp_path
     scene.artgs.capture_dir, scene.artgs.output_dir = str(capture), str(out)
     with pytest.raises(RuntimeError) as err:
         bpy.ops.artgs.propose_bones()
-    message = scene.artgs.bones.message
-    assert scene.artgs.bones.status == "FAILED"
+    message = scene.artgs.propose.message
+    assert scene.artgs.propose.status == "FAILED"
     assert str(out / "splat.ply") in message and "vertex[11]" in message and "field 'z'" in message
     assert message in str(err.value) and "Traceback" not in str(err.value)
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before

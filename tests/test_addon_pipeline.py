@@ -40,7 +40,7 @@ check = {{
     "bones": sorted(b.name for a in arms for b in a.data.bones),
     "cameras": sum(o.type == "CAMERA" for o in bpy.data.objects),
     "splat": bpy.context.scene.artgs.splat_object is not None,
-    "states": {{s: bpy.context.scene.artgs.stage(s).status for s in ("capture", "splat", "bones")}},
+    "states": {{s: bpy.context.scene.artgs.stage(s).status for s in ("capture", "reconstruct", "propose")}},
 }}
 ops = bpy.ops.artgs  # the operators the pipeline does not run, in the same process
 check["more"] = [sorted(op()) for op in (ops.import_splat, ops.add_joint, ops.save_joints,
@@ -58,7 +58,7 @@ def test_headless_pipeline(tmp_path):
     driver = _DRIVER.format(script=str(ROOT / "scripts" / "headless_pipeline.py"),
                             blend=str(out / "scene.blend"), heavy=HEAVY)
     proc = subprocess.run([sys.executable, "-c", driver, str(capture), str(out),
-                           "--iterations", "10", "--until", "bones", "--preview-size", "160", "--engine", engine_python(),
+                           "--iterations", "10", "--until", "propose", "--preview-size", "160", "--engine", engine_python(),
                            "--panels", str(out / "stages")],
                           capture_output=True, text=True, timeout=600, cwd=tmp_path)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("CHECK ")]
@@ -75,7 +75,7 @@ def test_headless_pipeline(tmp_path):
     assert len(joints) > 1 and sorted(check["bones"] + ["joint"]) == sorted(j.name for j in joints)
     assert [j.source for j in joints if j.name == "joint"] == ["user"]
     assert check["cameras"] >= 6 and check["splat"]
-    assert check["states"] == {"capture": "DONE", "splat": "DONE", "bones": "DONE"}
+    assert check["states"] == {"capture": "DONE", "reconstruct": "DONE", "propose": "DONE"}
 
     # preview.png: the labelled contact sheet, 2x2 panels of 160x120 under 18-pixel labels
     sheet = read_png(out / "preview.png")

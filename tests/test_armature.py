@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
-from registered_addon import addon, ctx  # noqa: E402,F401 (fixtures)
 from mathutils import Matrix, Vector  # noqa: E402
 
 import artgs  # noqa: E402

@@ -22,7 +22,8 @@ from artgs.core.train.evaluate import evaluate
 from artgs.core.train.params import splat_params
 from artgs.core.train.views import make_view
 from artgs.core.synth.generate import generate_object
-from artgs.core.synth.objects import box_distance, random_spec
+from artgs.core.synth.layouts import random_spec
+from artgs.core.synth.objects import box_distance
 
 CATEGORY, SEED = "cabinet", 0
 

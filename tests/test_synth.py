@@ -17,7 +17,8 @@ from artgs.core.cli import main
 from artgs.core.model.categories import CATEGORIES
 from artgs.core.model.joints import read_articulation
 from artgs.core.synth.generate import generate_object, generate_set
-from artgs.core.synth.objects import box_distance, random_spec
+from artgs.core.synth.layouts import random_spec
+from artgs.core.synth.objects import box_distance
 
 SMALL = dict(width=64, height=48, static_views=4, steps=3, simultaneous=True)
 

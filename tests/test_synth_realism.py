@@ -24,7 +24,7 @@ from artgs.core.model.regime import regime
 from artgs.core.sim.client import Scene
 from artgs.core.synth import sensor
 from artgs.core.synth.generate import FOCAL_FACTOR, framing, generate_asset, generate_object
-from artgs.core.synth.objects import random_spec
+from artgs.core.synth.layouts import random_spec
 
 TINY = dict(width=64, height=48, static_views=3, steps=2)
 

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
-from registered_addon import addon, ctx  # noqa: E402,F401 (fixtures)
 # Engine modules run in this process here: in the bpy 5.x half of `make test` (numpy-only venv)
 # this file is skipped, with this reason in the summary.
 trimesh = pytest.importorskip("trimesh", reason="needs the engine's packages in Blender's process "
@@ -24,7 +23,7 @@ from artgs.core.sim.urdf import Geometry, Link, Mesh, write_urdf  # noqa: E402
 from artgs.core.sim.validate import fk_check  # noqa: E402
 from artgs.core.stages.export.collision import write_obj  # noqa: E402
 from artgs.core.stages.export.stage import link_frames, urdf_joint  # noqa: E402
-from artgs.core.synth.objects import random_spec  # noqa: E402
+from artgs.core.synth.layouts import random_spec  # noqa: E402
 
 
 def _joints() -> list[Joint]:
@@ -133,7 +132,7 @@ def test_check_operator_runs_in_the_engine_and_loads_the_strip(ctx, tmp_path):
     ctx.scene.artgs.output_dir = str(out)
     assert bpy.ops.artgs.export_urdf.poll() and bpy.ops.artgs.check_manipulation.poll()
     assert bpy.ops.artgs.check_manipulation("EXEC_DEFAULT") == {"FINISHED"}
-    state = ctx.scene.artgs.export
+    state = ctx.scene.artgs.check
     assert state.status == "DONE" and "opened 2/2" in state.text, state.text
     image = bpy.data.images[STRIP_IMAGE]
     assert tuple(image.size) == (6 * 160, 2 * 120)

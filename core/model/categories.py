@@ -4,3 +4,6 @@ CATEGORIES = ("dishwasher", "refrigerator", "oven", "microwave", "storage", "dra
 
 #: Kinds beyond the seven that the synthetic generator draws in regimes with variety.
 EXTRA_KINDS = ("door", "washing_machine", "chest")
+
+#: Everything the generator makes: the seven categories, then kinds drawn only with variety.
+KINDS = CATEGORIES + EXTRA_KINDS

@@ -42,7 +42,7 @@ import numpy as np
 
 from ..model import atomic
 from ..model.cameras import Camera, intrinsics, look_at
-from ..model.categories import CATEGORIES
+from ..model.categories import CATEGORIES, KINDS
 from ..model.errors import InputError
 from ..model.joints import Articulation, Joint, write_articulation
 from ..model.progress import QUIET, Progress
@@ -50,7 +50,8 @@ from ..model.regime import Regime, regime as make_regime
 from ..sim.client import Scene
 from . import sensor
 from .asset import AssetSpec, load_asset
-from .objects import KINDS, ObjectSpec, random_spec
+from .layouts import random_spec
+from .objects import ObjectSpec
 from .robot import RobotInScene, check_robot, plan_robot, robot_keys
 from .room import room_urdf
 from .texture import make_texture

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..model.categories import CATEGORIES, EXTRA_KINDS
+from ..model.categories import CATEGORIES, EXTRA_KINDS, KINDS
 from ..model.regime import PRESETS
 from ..model.registry import option
 from ..model.robots import ROBOTS
@@ -17,7 +17,7 @@ class SynthOptions:
     out: str = option(None, "folder to write; one capture folder per object", positional=True)
     category: list[str] | None = option(None, "categories to generate (default all seven, plus "
                                         f"{', '.join(EXTRA_KINDS)} in regimes with variety)",
-                                        choices=CATEGORIES + EXTRA_KINDS)
+                                        choices=KINDS)
     per_category: int = option(1, "objects per category")
     seed: int = option(0, "seed of the set")
     width: int = option(160, "image width")
