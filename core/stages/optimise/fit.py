@@ -41,7 +41,7 @@ class FitConfig:
     lr_final: float = 0.05             # learning rates decay exponentially to this fraction
     widen: float = 10.0                # robust sigmas at the start of the coarse phase, x
     coarse: float = 0.4                # fraction of the first fit's steps at the coarsest level
-    plateau: float = 1e-3              # full-resolution steps: mean relative loss improvement
+    plateau: float = 1e-3              # refinements (no coarse phase): mean relative loss gain
     #                                    per revisit of a time below which the rates drop
     drop: float = 0.25                 # ... by this factor; the fit stops below ``lr_final``
     backend: str = "auto"
@@ -101,7 +101,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     losses: list[float] = []
     for step in range(steps):
         in_coarse = step < n_coarse
-        if in_coarse:  # a fixed schedule while the loss itself changes (level, robustness)
+        if n_coarse:   # a first fit: the fixed schedule (the loss itself changes: level, robustness)
             rate = cfg.lr_final ** (step / steps)
         for name in opt.lrs:
             opt.lrs[name] = lrs[name] * rate
@@ -131,7 +131,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         losses.append(float(loss.detach()))
         if tick is not None:
             tick(step, losses[-1])
-        if not in_coarse and plateau.stalled(ti, losses[-1]):
+        if not n_coarse and plateau.stalled(ti, losses[-1]):   # a refinement: until converged
             rate *= cfg.drop
             if rate < cfg.lr_final:
                 break
