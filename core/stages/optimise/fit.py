@@ -41,9 +41,6 @@ class FitConfig:
     lr_final: float = 0.05             # learning rates decay exponentially to this fraction
     widen: float = 10.0                # robust sigmas at the start of the coarse phase, x
     coarse: float = 0.4                # fraction of the first fit's steps at the coarsest level
-    plateau: float = 1e-3              # refinements (no coarse phase): mean relative loss gain
-    #                                    per revisit of a time below which the rates drop
-    drop: float = 0.25                 # ... by this factor; the fit stops below ``lr_final``
     backend: str = "auto"
 
 
@@ -96,15 +93,12 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     pool = list(range(len(frames.times))) if times is None else list(times)
     coarse_level = len(frames.levels) - 1
     n_coarse = int(coarse * steps)
-    rate = 1.0
-    plateau = Plateau(len(pool), cfg)
     losses: list[float] = []
     for step in range(steps):
-        in_coarse = step < n_coarse
-        if n_coarse:   # a first fit: the fixed schedule (the loss itself changes: level, robustness)
-            rate = cfg.lr_final ** (step / steps)
+        decay = cfg.lr_final ** (step / steps)
         for name in opt.lrs:
-            opt.lrs[name] = lrs[name] * rate
+            opt.lrs[name] = lrs[name] * decay
+        in_coarse = step < n_coarse
         level = coarse_level if in_coarse else 0
         # graduated robustness: the coarse phase starts L1-like (wide basin) and tightens
         widen = cfg.widen ** (1 - step / n_coarse) if in_coarse else 1.0
@@ -131,36 +125,9 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         losses.append(float(loss.detach()))
         if tick is not None:
             tick(step, losses[-1])
-        if not n_coarse and plateau.stalled(ti, losses[-1]):   # a refinement: until converged
-            rate *= cfg.drop
-            if rate < cfg.lr_final:
-                break
     model.load({k: v.detach() for k, v in opt.params.items()})
-    tail = losses[-max(1, len(losses) // 4):]
+    tail = losses[-max(1, steps // 4):]
     return float(np.mean(tail))
-
-
-class Plateau:
-    """Convergence of the full-resolution steps: the loss at each step is compared with the loss
-    at the same time's previous visit (a paired difference: times differ far more from each other
-    than a step changes them); every ``window`` steps (at least the number of times) the mean
-    relative improvement is checked against ``cfg.plateau``."""
-
-    def __init__(self, times: int, cfg: FitConfig) -> None:
-        self.window = max(times, 10)
-        self.tol = cfg.plateau
-        self.last: dict[int, float] = {}
-        self.gains: list[float] = []
-
-    def stalled(self, ti: int, loss: float) -> bool:
-        """Record the loss of time index ``ti``; True at the end of a window without progress."""
-        if ti in self.last:
-            self.gains.append((self.last[ti] - loss) / max(abs(self.last[ti]), 1e-12))
-        self.last[ti] = loss
-        if len(self.gains) < self.window:
-            return False
-        gain, self.gains = float(np.mean(self.gains)), []
-        return gain < self.tol
 
 
 @torch.no_grad()
