@@ -20,7 +20,7 @@ from artgs.core.model.joints import (Articulation, joint_transform, read_articul
 from artgs.core.model.ply import write_ply
 from artgs.core.model.progress import QUIET, Progress
 from artgs.core.stages.optimise import OptimiseOptions, optimise
-from artgs.core.stages.optimise.kinematics import joint_motions, skin
+from artgs.core.stages.optimise.kinematics import joint_motions, skin, skin_rigid
 from artgs.core.stages.reconstruct import initial_splats
 from artgs.core.synth.generate import generate_object
 
@@ -93,6 +93,31 @@ def test_skinning_gradients_match_finite_differences():
         return (m ** 2).sum() + (m[:, 0] * r[:, 1]).sum() + r.sum()
 
     assert torch.autograd.gradcheck(f, (axes, origins, values, logits), eps=1e-6, atol=1e-6)
+
+
+def test_rigid_skinning_matches_one_hot_blend_skinning():
+    """skin_rigid (the hardened model's fast path) = skin with one-hot weights, values and
+    gradients to the joint parameters."""
+    rng = np.random.default_rng(5)
+    d = dict(dtype=torch.float64)
+    labels = torch.tensor([0, 1, 2, 1, 0, 2, 2])
+    means = torch.tensor(rng.normal(size=(7, 3)), **d)
+    quats = torch.tensor(rng.normal(size=(7, 4)), **d)
+    quats = quats / quats.norm(dim=-1, keepdim=True)
+    axes_np = rng.normal(size=(2, 3))
+    out = []
+    for fn in (skin_rigid, skin):
+        axes = torch.tensor(axes_np, **d, requires_grad=True)
+        origins = torch.tensor([[0.1, 0.2, 0.3], [0.0, -0.5, 0.2]], **d, requires_grad=True)
+        values = torch.tensor([0.7, 0.3], **d, requires_grad=True)
+        R, t, q = joint_motions(["revolute", "prismatic"], axes, origins, values)
+        w = labels if fn is skin_rigid else torch.nn.functional.one_hot(labels, 3).double()
+        m, r = fn(means, quats, w, R, t, q)
+        ((m ** 2).sum() + (r * torch.arange(4.0, dtype=torch.float64)).sum()).backward()
+        out.append((m.detach(), r.detach(), axes.grad, origins.grad, values.grad))
+    for a, b in zip(*out):
+        np.testing.assert_allclose(a.numpy(), b.numpy(), atol=1e-10)
+    assert not np.allclose(out[0][0][1].numpy(), means[1].numpy())   # the parts did move
 
 
 def test_hard_skinning_is_the_rigid_motion():
@@ -234,3 +259,44 @@ def test_missed_part_added(cabinet, tmp_path):
     s = match_joints([new], [door])[0]
     assert s.axis_error_deg < 5.0 and s.origin_error_cm < 5.0, s
     assert abs(max(new.states.values()) - door.limit[1]) < 0.2
+
+
+# --- camera refinement ---------------------------------------------------------------------------
+
+def _misregister(cap: Path, dst: Path, degrees: float, cm: float) -> Path:
+    """A copy of capture ``cap`` whose first interaction camera is registered wrong: its recorded
+    pose turned by ``degrees`` about its centre and moved by ``cm`` (the images stay the true
+    camera's)."""
+    import json
+    import shutil
+    shutil.copytree(cap, dst)
+    meta = json.loads((dst / "transforms.json").read_text())
+    inter = [f for f in meta["frames"] if f.get("phase") == "interaction"]
+    first = np.array(inter[0]["transform_matrix"])
+    turn = rotation_about_axis(np.array([0.3, 1.0, -0.2]) / np.linalg.norm([0.3, 1.0, -0.2]),
+                               np.radians(degrees))
+    for f in inter:
+        m = np.array(f["transform_matrix"])
+        if np.allclose(m, first):
+            m[:3, :3] = turn @ m[:3, :3]
+            m[:3, 3] += np.array([0.6, -0.8, 0.0]) * cm / 100
+            f["transform_matrix"] = m.tolist()
+    (dst / "transforms.json").write_text(json.dumps(meta))
+    return dst
+
+
+def test_camera_refinement_finds_a_misregistered_camera(cabinet, tmp_path):
+    """The first interaction camera is registered 2° / 2 cm off: its learnt correction is about
+    that, the other camera's stays small, and the joints end near the truth."""
+    cap = _misregister(cabinet, tmp_path / "cap", 2.0, 2.0)
+    gt = read_articulation(cabinet / "gt.json")
+    start = [_perturb(j, 5.0, 0.02, seed=3 + k) for k, j in enumerate(gt.joints)]
+    out = _out(tmp_path, cap, start)
+    figures = optimise(out, load_capture(cap), QUIET,
+                       OptimiseOptions(iterations=120, types=False, parts=False, cameras=True))
+    first, second = figures["cameras"]
+    assert 1.0 < first["rotation_deg"] < 3.0 and second["rotation_deg"] < 0.7, figures["cameras"]
+    for s in match_joints(read_articulation(out / layout.ARTICULATION).joints, gt.joints):
+        assert s.axis_error_deg < 3.0, s
+        if s.origin_error_cm is not None:
+            assert s.origin_error_cm < 2.0, s

@@ -36,6 +36,8 @@ class FitConfig:
     lr_origins: float = 0.004          # x object size
     lr_states: float = 0.01
     lr_logits: float = 0.1
+    lr_cameras: float = 0.001          # camera corrections (rad; object sizes)
+    lambda_camera: float = 1e-3        # their prior, in units of 1 degree and 1 % of the size
     lr_final: float = 0.05             # learning rates decay exponentially to this fraction
     widen: float = 10.0                # robust sigmas at the start of the coarse phase, x
     coarse: float = 0.4                # fraction of the first fit's steps at the coarsest level
@@ -68,7 +70,8 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         lr_scale: float = 1.0) -> float:
     """Run ``steps`` Adam steps; returns the mean loss of the last quarter of them.
 
-    ``free``: joints that move (default all); ``times``: time indices to sample (default all);
+    ``free``: joints that move (default all; the camera corrections, when learnt, move only
+    then); ``times``: time indices to sample (default all);
     ``prior``: per-joint strength of the pull towards the start; ``tick(step, loss)`` is called
     every step (progress and cancel); ``coarse``: fraction of the steps at the coarsest level;
     ``lr_scale``: multiplies the learning rates (refining phases start below the first fit's
@@ -80,7 +83,8 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     dev = model.axes.device
     size = model.size
     lrs = {"axes": cfg.lr_axes * lr_scale, "origins": cfg.lr_origins * size * lr_scale,
-           "states": cfg.lr_states * lr_scale, "logits": cfg.lr_logits}
+           "states": cfg.lr_states * lr_scale, "logits": cfg.lr_logits,
+           "cameras": cfg.lr_cameras * lr_scale}
     params = model.params()
     opt = Adam(params, {k: lrs[k] for k in params}, eps=1e-12)
     model.load(opt.params)
@@ -88,15 +92,16 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         torch.tensor(free, dtype=torch.float32, device=dev)
     pool = list(range(len(frames.times))) if times is None else list(times)
     coarse_level = len(frames.levels) - 1
+    n_coarse = int(coarse * steps)
     losses: list[float] = []
     for step in range(steps):
         decay = cfg.lr_final ** (step / steps)
         for name in opt.lrs:
             opt.lrs[name] = lrs[name] * decay
-        in_coarse = step < coarse * steps
+        in_coarse = step < n_coarse
         level = coarse_level if in_coarse else 0
         # graduated robustness: the coarse phase starts L1-like (wide basin) and tightens
-        widen = cfg.widen ** (1 - step / (coarse * steps)) if in_coarse else 1.0
+        widen = cfg.widen ** (1 - step / n_coarse) if in_coarse else 1.0
         ti = int(rng.choice(pool))
         ids = frames.at_time(ti)
         loss = sum(frame_loss(model, frames, level, i, cfg, widen) for i in ids) / max(len(ids), 1)
@@ -105,8 +110,12 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
             + cfg.lambda_temporal * model.temporal()
         if prior is not None and cfg.lambda_prior:
             loss = loss + cfg.lambda_prior * model.prior(prior)
+        if model.refine_cameras:
+            loss = loss + cfg.lambda_camera * model.camera_prior(np.radians(1.0), 0.01)
         opt.zero_grad()
         loss.backward()
+        if free is not None and "cameras" in opt.params:   # one joint's hypothesis: cameras stay
+            opt.params["cameras"].grad = None
         for name in ("axes", "origins", "states"):
             g = opt.params[name].grad
             if g is not None:

@@ -19,7 +19,8 @@ from scipy.spatial import cKDTree
 from ...model.joints import Joint
 from ...render.gaussians import Gaussians, concat
 from ...render.rasterize import rasterize
-from .kinematics import PRISMATIC, REVOLUTE, joint_motions, skin
+from .kinematics import (PRISMATIC, REVOLUTE, joint_motions, quat_multiply, skew, skin,
+                         skin_rigid)
 
 HARD_LOGIT = 8.0    # logit of a hardened / box-assigned part (weight ~0.999 with 2 parts)
 
@@ -43,6 +44,21 @@ class Splat:
         def t(x):
             return torch.as_tensor(np.asarray(x), dtype=torch.float32, device=device)
         return cls(t(a.means), t(a.quats), t(a.log_scales), t(a.opacity_logits), t(a.sh))
+
+
+def camera_motion(means: torch.Tensor, quats: torch.Tensor, w2c: torch.Tensor,
+                  rotvec: torch.Tensor, shift: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gaussians moved so that the camera ``w2c`` sees them as a camera corrected by the rotation
+    ``rotvec`` and translation ``shift`` (m) in its own frame would: x -> W⁻¹ Δ W x, Δ = [exp(ω×) | s].
+    Smooth at zero (the start), where the correction is the identity."""
+    Rw, tw = w2c[:3, :3], w2c[:3, 3]
+    Rd = torch.linalg.matrix_exp(skew(rotvec))
+    R = Rw.T @ Rd @ Rw
+    t = Rw.T @ (Rd @ tw + shift - tw)
+    w = Rw.T @ rotvec                      # the same rotation as a world rotation vector
+    angle = torch.sqrt((w * w).sum() + 1e-20)
+    q = torch.cat([torch.cos(angle / 2)[None], 0.5 * torch.sinc(angle / (2 * torch.pi)) * w])
+    return means @ R.T + t, quat_multiply(q.expand_as(quats), quats)
 
 
 class ArticulatedSplat:
@@ -69,6 +85,11 @@ class ArticulatedSplat:
         self.logits = torch.zeros(splat.n, K + 1, **f)
         self.logits[torch.arange(splat.n), torch.as_tensor(labels, device=dev)] = HARD_LOGIT
         self.hard: torch.Tensor | None = None
+        # per fixed interaction camera: a correction (rotation vector, translation in object
+        # sizes) in the camera's frame, learnt when ``refine_cameras`` (:func:`camera_motion`)
+        self.camera_of: list[int] = []
+        self.cameras = torch.zeros(0, 6, **f)
+        self.refine_cameras = False
         tree = cKDTree(splat.means.cpu().numpy())
         k = min(knn + 1, splat.n)
         self.neighbours = torch.as_tensor(tree.query(splat.means.cpu().numpy(), k)[1][:, 1:],
@@ -91,7 +112,17 @@ class ArticulatedSplat:
         p = {"axes": self.axes, "origins": self.origins, "states": self.states}
         if self.hard is None:
             p["logits"] = self.logits
+        if self.refine_cameras:
+            p["cameras"] = self.cameras
         return p
+
+    def use_cameras(self, camera_of: list[int]) -> None:
+        """Learn a correction of each fixed interaction camera; ``camera_of[i]`` is the camera of
+        the frame whose view has index ``i``."""
+        self.camera_of = list(camera_of)
+        self.cameras = torch.zeros(max(camera_of, default=-1) + 1, 6, dtype=torch.float32,
+                                   device=self.axes.device)
+        self.refine_cameras = True
 
     def load(self, params: dict[str, torch.Tensor]) -> None:
         """Take the optimiser's tensors as the current values."""
@@ -132,12 +163,17 @@ class ArticulatedSplat:
             return s.means, s.quats
         R, t, q = joint_motions(self.types, self.joint_axes(), self.joint_origins(),
                                 self.values(ti))
+        if self.hard is not None:
+            return skin_rigid(s.means, s.quats, self.hard, R, t, q)
         return skin(s.means, s.quats, self.weights(), R, t, q)
 
     def render(self, view, ti: int, backend: str = "auto"):
         """The posed splat at time index ``ti`` seen by ``view``, with the view's known occluder
         Gaussians (a robot twin) rendered in."""
         means, quats = self.posed(ti)
+        if self.refine_cameras:
+            c = self.cameras[self.camera_of[view.index]]
+            means, quats = camera_motion(means, quats, view.w2c, c[:3], c[3:] * self.size)
         s = self.splat
         g = Gaussians(means, quats, s.log_scales, s.opacity_logits, s.sh)
         if view.occluder is not None:
@@ -146,15 +182,29 @@ class ArticulatedSplat:
                          view.width, view.height, None, backend)
 
     # --- regularisers --------------------------------------------------------------------------
-    def skin_regularisers(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """kNN smoothness (mean L1 difference of neighbours' weights) and mean entropy."""
+    def skin_regularisers(self, sample: int = 2048) -> tuple[torch.Tensor, torch.Tensor]:
+        """kNN smoothness (mean L1 difference of neighbours' weights) and mean entropy, estimated
+        on a random ``sample`` of the Gaussians (unbiased; a step's cost stays that of the render
+        whatever the splat's size)."""
         if self.hard is not None or self.k == 0:
             z = torch.zeros((), device=self.axes.device)
             return z, z
-        w = torch.softmax(self.logits, -1)
-        smooth = (w[:, None, :] - w[self.neighbours]).abs().sum(-1).mean()
+        n = self.splat.n
+        idx = torch.randint(n, (sample,), device=self.logits.device) if n > sample else \
+            torch.arange(n, device=self.logits.device)
+        w = torch.softmax(self.logits[idx], -1)
+        wn = torch.softmax(self.logits[self.neighbours[idx]], -1)
+        smooth = (w[:, None, :] - wn).abs().sum(-1).mean()
         entropy = -(w * torch.log(w.clamp_min(1e-8))).sum(-1).mean()
         return smooth, entropy
+
+    def camera_prior(self, rotation: float, translation: float) -> torch.Tensor:
+        """Sum over cameras of the squared correction in units of ``rotation`` (rad) and
+        ``translation`` (object sizes): keeps the cameras where the frames do not pull them."""
+        if not self.refine_cameras:
+            return torch.zeros((), device=self.axes.device)
+        c = self.cameras
+        return ((c[:, :3] / rotation) ** 2).sum() + ((c[:, 3:] / translation) ** 2).sum()
 
     def temporal(self) -> torch.Tensor:
         """Mean squared change of the states between consecutive times (state units)."""

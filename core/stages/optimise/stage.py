@@ -135,6 +135,8 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                              [is_locked(j) for j in joints])
     trust = torch.tensor([USER_TRUST if j.source == "user" else 0.0 for j in joints],
                          dtype=torch.float32, device=dev)
+    if options.cameras:
+        model.use_cameras(frames.camera)
     run = Runner(model, frames, cfg, progress, options, trust)
     n = options.iterations
     progress.log(f"optimise: {len(joints)} joint(s), {splat.n} Gaussians, "
@@ -175,12 +177,24 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                                          "loss": float(losses.mean()), "removed": removed,
                                          "added": added})
     figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
+               "cameras": camera_corrections(model),
                "kept_start": kept_start, "added": added,
                "types": [j.type for j in result],
                "seconds": round(time.perf_counter() - t0, 2)}
     write_labels(out / layout.PART_LABELS, model.labels())
     write_articulation(out / layout.ARTICULATION, articulation)
     return figures
+
+
+def camera_corrections(model: ArticulatedSplat) -> list[dict[str, float]]:
+    """The learnt correction of each fixed interaction camera: rotation (degrees) and
+    translation (cm); empty when the cameras were taken as registered."""
+    if not model.refine_cameras:
+        return []
+    c = model.cameras.detach().cpu().numpy().astype(float)
+    return [{"rotation_deg": round(math.degrees(float(np.linalg.norm(r[:3]))), 4),
+             "translation_cm": round(100 * model.size * float(np.linalg.norm(r[3:])), 4)}
+            for r in c]
 
 
 def write_labels(path: Path, labels: np.ndarray) -> None:
