@@ -89,7 +89,7 @@ class OptimiseOptions:
     parts: bool = option(True, "remove parts the frames do not show moving and add parts they "
                          "show moving that no joint explains (--no-parts: the proposed parts)")
     seed: int = option(0, "random seed of the frame sampling")
-    cameras: bool = option(True, "learn a small correction (rotation, translation) of each fixed "
+    cameras: bool = option(False, "learn a small correction (rotation, translation) of each fixed "
                            "interaction camera (--no-cameras: take them as registered)")
     device: str = _device()
     max_side: int = _max_side()
