@@ -145,7 +145,7 @@ def test_recovers_perturbed_joints(cabinet, tmp_path):
     start = [_perturb(j, 20.0, 0.08, seed=k) for k, j in enumerate(gt.joints)]
     out = _out(tmp_path, cabinet, start)
     figures = optimise(out, load_capture(cabinet), QUIET,
-                       OptimiseOptions(iterations=150, types=False, parts=False))
+                       OptimiseOptions(iterations=150, types=False, parts=False, cameras=True))
     art = read_articulation(out / layout.ARTICULATION)
     assert art.meta["optimised"] is True and figures["joints"] == 2
     for s in match_joints(art.joints, gt.joints):
