@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..geometry.consistency import unsupported
 from ..model import layout
 from ..model.capture import Capture, Frame
 from ..model.errors import ArtgsError, InputError, NothingFound
@@ -178,7 +179,9 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
     (footprint = depth / focal). Each voxel's Gaussian sits at the mean of its points, with their
     mean colour and a standard deviation of ``scale`` times their mean footprint; where the
     voxel's depth normals agree it is a disc in the surface (``flat`` times thinner along the
-    normal), elsewhere isotropic with identity rotation.
+    normal), elsewhere isotropic with identity rotation. Voxels that two or more views
+    contradict (flying depth pixels, dilated masks, the noise of far views:
+    :func:`unsupported`, with a margin of two voxels) are left out.
     """
     pts, cols, foot, nrm = [], [], [], []
     for f in frames:
@@ -199,10 +202,14 @@ def initial_splats(frames: list[Frame], *, sh_degree: int = 1, voxel_pixels: flo
     def total(a: np.ndarray) -> np.ndarray:
         return np.stack([np.bincount(inv, weights=a[:, i]) for i in range(a.shape[1])], -1)
 
-    n = len(counts)
     means, colour = total(P) / counts[:, None], total(C) / counts[:, None]
     sigma = scale * total(S[:, None])[:, 0] / counts
     normal = total(np.concatenate(nrm))
+    keep = ~unsupported(means, frames, 2 * voxel)
+    if keep.sum() >= 0.5 * len(keep):   # a capture the test cannot serve keeps every voxel
+        means, colour, sigma, normal, counts = (a[keep] for a in (means, colour, sigma, normal,
+                                                                  counts))
+    n = len(counts)
     length = np.linalg.norm(normal, axis=1)
     disc = length > 0.5 * counts  # normals present and agreeing
     quats = np.tile(np.array([1.0, 0, 0, 0]), (n, 1))

@@ -6,7 +6,7 @@ of the image the object covers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
@@ -60,7 +60,8 @@ def view_loss(r: RenderOutput, v: View, w: LossWeights, depth_unit: float) -> to
 
 def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb: float = 0.1,
                       sigma_depth: float = 2.0, sigma_alpha: float = 0.5,
-                      lambda_ssim: float = 0.2) -> torch.Tensor:
+                      lambda_ssim: float = 0.2, noise_sigmas: float = 0.0,
+                      exposure: bool = False) -> torch.Tensor:
     """A loss that pixels no model explains cannot drag (an unseen interior revealed by an open
     door, an arm, a shadow, a flying depth pixel).
 
@@ -71,19 +72,59 @@ def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb:
     image and divided by the object pixels; plus ``λ_ssim (1 − SSIM)`` over the pixels with
     r < 1.
 
+    ``noise_sigmas``: the depth scale is at least this many of the view's measured depth noise
+    (``v.depth_noise``): a far camera's centimetres of noise would otherwise put every pixel in
+    the saturated part of ρ, where no pixel pulls. ``exposure``: the render's colour is scaled
+    by the frame's exposure gain, the median ratio of frame to render colour over the object
+    pixels the render covers (a constant of the step: auto-exposure changes the whole frame's
+    brightness, and an uncorrected gain of 10 % is a colour error on every pixel).
+    Where the view carries ``mask_offsets`` (its mask grown and shrunk by a few pixels), the
+    offset that best matches the render's alpha is the frame's mask for this step (a constant,
+    like the gain): a segmentation a pixel too wide or too narrow all round otherwise turns
+    into colour and alpha errors along the whole silhouette that outweigh a part's motion.
+
     Where ``v.occluder_depth`` shows something that is not the object (an arm, a hand), a render
     whose surface there lies behind it (or is empty) is not compared: the object is hidden there.
     """
-    colour = (r.rgb - v.rgb).abs().mean(-1) / sigma_rgb
-    depth = torch.where(v.depth_valid, (r.depth - v.depth).abs() / (sigma_depth * depth_unit),
+    v = matched_mask(r, v)
+    rgb = r.rgb * exposure_gain(r, v) if exposure else r.rgb
+    colour = (rgb - v.rgb).abs().mean(-1) / sigma_rgb
+    scale = max(sigma_depth * depth_unit, noise_sigmas * v.depth_noise)
+    depth = torch.where(v.depth_valid, (r.depth - v.depth).abs() / scale,
                         torch.zeros_like(r.depth))
     alpha = (r.alpha - v.mask).abs() / sigma_alpha
     res = colour + depth + alpha
     if v.occluder_depth is not None:
         occ = v.occluder_depth
-        hidden = (occ > 0) & ((r.depth <= 0) | (r.depth > occ - sigma_depth * depth_unit))
+        hidden = (occ > 0) & ((r.depth <= 0) | (r.depth > occ - scale))
         res = torch.where(hidden.detach(), torch.zeros_like(res), res)
     loss = (res / (1 + res)).sum() / v.pixels
     if lambda_ssim:
-        loss = loss + lambda_ssim * (1 - ssim(r.rgb, v.rgb, (res.detach() < 1).float()))
+        loss = loss + lambda_ssim * (1 - ssim(rgb, v.rgb, (res.detach() < 1).float()))
     return loss
+
+
+@torch.no_grad()
+def matched_mask(r: RenderOutput, v: View) -> View:
+    """``v`` with the mask offset (of ``v.mask_offsets``) nearest the render's alpha (L1), its
+    colour and depth validity masked by it; ``v`` itself when it has no offsets."""
+    if v.mask_offsets is None:
+        return v
+    cost = (v.mask_offsets - r.alpha[None]).abs().flatten(1).sum(1)
+    mask = v.mask_offsets[int(torch.argmin(cost))]
+    rgb = v.rgb if v.rgb_full is None else v.rgb_full * mask[..., None]
+    return replace(v, mask=mask, rgb=rgb, depth_valid=(v.depth > 0) & (mask > 0.5),
+                   mask_offsets=None)
+
+
+@torch.no_grad()
+def exposure_gain(r: RenderOutput, v: View, lo: float = 0.5, hi: float = 2.0) -> torch.Tensor:
+    """The frame's exposure relative to the render: the median of frame / render brightness over
+    the object pixels the render covers and that are not dark (ratios of dark pixels are noise);
+    1 when fewer than 16 such pixels; clamped to [lo, hi]."""
+    a = r.rgb.mean(-1)
+    b = v.rgb.mean(-1)
+    ok = (v.mask > 0.5) & (r.alpha > 0.5) & (a > 0.05) & (b > 0.02)
+    if int(ok.sum()) < 16:
+        return torch.ones((), dtype=r.rgb.dtype, device=r.rgb.device)
+    return (b[ok] / a[ok]).median().clamp(lo, hi)

@@ -29,6 +29,13 @@ class View:
     # robot twin), and the depth of other things in front that are not the object (0 = none)
     occluder: Any = None
     occluder_depth: torch.Tensor | None = None
+    # the camera's depth noise at this resolution (m, one sigma; 0 = not measured), measured from
+    # its own depth maps (core/geometry/noise.py) where a loss must follow the capture's noise
+    depth_noise: float = 0.0
+    # masks are never exact: the mask grown or shrunk by -D..D pixels (2D+1,H,W), and the frame's
+    # colour without the mask (H,W,3); set where a loss picks each frame's offset (optimise)
+    mask_offsets: torch.Tensor | None = None
+    rgb_full: torch.Tensor | None = None
 
 
 def make_view(index: int, f: Frame, device: torch.device) -> View:

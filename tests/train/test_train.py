@@ -81,3 +81,36 @@ def test_run_loop_reports_stops_and_cancels():
     with pytest.raises(Cancelled):
         run_loop(lambda: 1.0, 0, 100, Progress("quiet", cancel=cancel), "stage",
                  plateau=Plateau(50, 0.0, enabled=False))
+
+
+def test_robust_loss_follows_exposure_and_depth_noise():
+    from artgs.core.train.losses import exposure_gain, robust_image_loss
+    v = _view()
+    v.rgb = (0.2 + 0.6 * v.rgb) * v.mask[..., None]          # no dark pixels
+    perfect = RenderOutput(v.rgb.clone(), v.depth.clone(), v.mask.clone())
+    # the frame 12 % brighter than the render: the gain is found and the colours then match
+    bright = View(**{**v.__dict__, "rgb": v.rgb * 1.12})
+    assert float(exposure_gain(perfect, bright)) == pytest.approx(1.12, rel=1e-4)
+    plain = float(robust_image_loss(perfect, bright, depth_unit=0.01, lambda_ssim=0.0))
+    fixed = float(robust_image_loss(perfect, bright, depth_unit=0.01, lambda_ssim=0.0,
+                                    exposure=True))
+    assert plain > 0.2 and fixed == pytest.approx(0.0, abs=1e-5)
+    # a depth error of 5 cm: saturating at a 2 cm scale, L1-like at 3 x 5 cm of measured noise
+    off = RenderOutput(v.rgb.clone(), v.depth + 0.05 * (v.depth > 0), v.mask.clone())
+    quiet = float(robust_image_loss(off, v, depth_unit=0.01, lambda_ssim=0.0))
+    noisy = View(**{**v.__dict__, "depth_noise": 0.05})
+    loud = float(robust_image_loss(off, noisy, depth_unit=0.01, lambda_ssim=0.0, noise_sigmas=3.0))
+    n = int(v.depth_valid.sum())
+    assert quiet == pytest.approx(n * (2.5 / 3.5) / v.pixels, rel=1e-4)
+    assert loud == pytest.approx(n * (1 / 3) / (4 / 3) / v.pixels, rel=1e-4)
+
+
+def test_noise_sigma_measures_depth_noise():
+    from artgs.core.geometry.noise import noise_sigma
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[0:60, 0:80]
+    plane = 2.0 + 0.01 * xx + 0.005 * yy                      # a slanted smooth surface
+    for sigma in (0.002, 0.03):
+        maps = [plane + rng.normal(0, sigma, plane.shape) for _ in range(3)]
+        assert noise_sigma(maps) == pytest.approx(sigma, rel=0.1)
+    assert noise_sigma([np.zeros((10, 10))]) == 0.0

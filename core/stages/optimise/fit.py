@@ -28,6 +28,9 @@ class FitConfig:
     sigma_rgb: float = 0.1             # per-pixel error scales of the robust loss
     sigma_depth: float = 2.0           # x 1 % of the object size
     sigma_alpha: float = 0.5
+    noise_sigmas: float = 3.0          # depth scale at least this many of the camera's noise
+    exposure: bool = True              # colour compared after the frame's exposure gain
+    mask_pixels: int = 2               # masks may be this many pixels too wide or narrow
     lambda_smooth: float = 0.05        # kNN smoothness of the skinning weights
     lambda_entropy: float = 0.02       # low entropy: parts are rigid
     lambda_temporal: float = 0.02      # squared state change between consecutive times
@@ -52,7 +55,8 @@ def frame_loss(model: ArticulatedSplat, frames: FrameSet, level: int, i: int,
     r = model.render(v, frames.time_index[i], cfg.backend)
     return robust_image_loss(r, v, depth_unit=0.01 * model.size, sigma_rgb=cfg.sigma_rgb * widen,
                              sigma_depth=cfg.sigma_depth * widen,
-                             sigma_alpha=cfg.sigma_alpha * widen, lambda_ssim=cfg.lambda_ssim)
+                             sigma_alpha=cfg.sigma_alpha * widen, lambda_ssim=cfg.lambda_ssim,
+                             noise_sigmas=cfg.noise_sigmas * widen, exposure=cfg.exposure)
 
 
 @torch.no_grad()

@@ -331,9 +331,11 @@ def contradicted(model: ArticulatedSplat, frames, cfg) -> np.ndarray:
         px, py = uv[:, 0].floor().long(), uv[:, 1].floor().long()
         inside = (z > 0) & (px >= 0) & (py >= 0) & (px < v.width) & (py < v.height)
         px, py = px.clamp(0, v.width - 1), py.clamp(0, v.height - 1)
-        seen = inside & ((r.depth[py, px] - z).abs() < cfg.sigma_depth * unit)
-        behind = v.depth_valid[py, px] & (v.depth[py, px] - z > 3 * cfg.sigma_depth * unit)
-        empty = v.mask[py, px] < 0.5
+        tol = max(cfg.sigma_depth * unit, cfg.noise_sigmas * v.depth_noise)
+        seen = inside & ((r.depth[py, px] - z).abs() < tol)
+        behind = v.depth_valid[py, px] & (v.depth[py, px] - z > 3 * tol)
+        wide = v.mask if v.mask_offsets is None else v.mask_offsets[-1]   # the widest mask
+        empty = wide[py, px] < 0.5
         hits[ti] |= base & seen & (behind | empty)
     return (hits[1:] & hits[:-1]).any(0).cpu().numpy()
 

@@ -126,7 +126,8 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     dev = resolve_device(options.device)
     torch.manual_seed(options.seed)
     frames = interaction_frames(capture, dev, occluders=known_occluders(capture, dev,
-                                                                       options.robot_twin))
+                                                                       options.robot_twin),
+                                mask_pixels=cfg.mask_pixels)
     splat = Splat.from_arrays(arrays, dev)
     size = object_size(arrays.means)
     joints = list(proposals.joints)

@@ -17,6 +17,8 @@ import numpy as np
 from scipy.ndimage import minimum_filter
 
 from ....model.cameras import Camera
+from ....geometry.consistency import depth_range
+from ....geometry.noise import noise_sigma
 from ....geometry.occlusion import object_depth
 from ....model.capture import Capture, Frame
 from .config import CLOSED_TIME, MotionConfig
@@ -77,19 +79,6 @@ class InteractionView:
         return self.ranges[t]
 
 
-def depth_range(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per pixel, the depth range its surface spans across the pixel: ``d -+ slack`` where the
-    slack is half the depth change to the neighbours on a smooth surface (both neighbours valid
-    and in line, per image direction); 0 where there is no object."""
-    slack = np.zeros_like(d)
-    pad = np.pad(d, 1, mode="edge")
-    for a, b in ((pad[1:-1, :-2], pad[1:-1, 2:]), (pad[:-2, 1:-1], pad[2:, 1:-1])):
-        smooth = (a > 0) & (b > 0) & (np.abs(a + b - 2 * d) < 0.02 * d + 0.25 * np.abs(b - a))
-        slack = np.maximum(slack, np.where(smooth, 0.5 * np.abs(b - a), 0.0))
-    valid = d > 0
-    return np.where(valid, d - slack, 0.0), np.where(valid, d + slack, 0.0)
-
-
 def group_views(frames: list[Frame]) -> list[list[Frame]]:
     """Interaction frames grouped by fixed camera (same pose and intrinsics), sorted by time."""
     groups: list[list[Frame]] = []
@@ -126,25 +115,6 @@ def make_views(capture: Capture, render_depth, config: MotionConfig, robot_depth
         v.rays = g[0].camera.pixel_rays()
         views.append(v)
     return views
-
-
-def masked_depth(f: Frame) -> np.ndarray:
-    d = np.zeros(f.rgb.shape[:2], np.float32) if f.depth is None else np.nan_to_num(f.depth)
-    if f.mask is not None:
-        d = np.where(f.mask, d, 0.0).astype(np.float32)
-    return d
-
-
-def noise_sigma(depths: list[np.ndarray]) -> float:
-    """Depth noise (m, one sigma) from second differences along image rows on smooth surfaces
-    (median over the images; a robust spread, so edges do not count)."""
-    sigmas = []
-    for d in depths:
-        a, b, c = d[:, :-2], d[:, 1:-1], d[:, 2:]
-        ok = (a > 0) & (b > 0) & (c > 0)
-        if ok.sum() > 20:
-            sigmas.append(1.4826 * float(np.median(np.abs(a + c - 2 * b)[ok])) / math.sqrt(6.0))
-    return float(np.median(sigmas)) if sigmas else 0.0
 
 
 def _thresholds(v: InteractionView, config: MotionConfig, rendered: bool) -> tuple[float, float]:

@@ -11,8 +11,7 @@ import numpy as np
 from scipy.ndimage import minimum_filter
 from scipy.spatial import cKDTree
 
-from ....model.capture import Frame
-from .cameras import InteractionView, depth_range, grid_points, lookup, masked_depth, pixels_of
+from .cameras import InteractionView, grid_points, lookup, pixels_of
 from .config import CLOSED_TIME
 
 
@@ -94,27 +93,6 @@ def _front_points(v: InteractionView, points: np.ndarray, spacing: float) -> np.
     zbuf = zbuf.reshape(v.ref.shape)
     zbuf = np.where(np.isfinite(zbuf), zbuf, minimum_filter(zbuf, size=3, mode="nearest"))
     return inside & (z < zbuf.reshape(-1)[flat] + max(v.threshold, 1.5 * spacing))
-
-
-def floaters(points: np.ndarray, frames: list[Frame], margin: float) -> np.ndarray:
-    """Splat points that two or more static views see through (measured depth beyond the point
-    by more than ``margin``): nothing moves in the static views, so these float off the surface
-    and would pass for vanished part points."""
-    through = np.zeros(len(points), np.int64)
-    for f in frames:
-        if f.depth is None:
-            continue
-        lo, _ = depth_range(masked_depth(f))
-        uv, z = f.camera.project(points)
-        h, w = lo.shape
-        with np.errstate(invalid="ignore"):
-            j = np.floor(uv[:, 0]).astype(np.int64)
-            i = np.floor(uv[:, 1]).astype(np.int64)
-        inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
-        d = np.zeros(len(points))
-        d[inside] = lo[i[inside], j[inside]]
-        through += (d > 0) & (d - z > margin)
-    return through >= 2
 
 
 def moving_at(points: np.ndarray, views: list[InteractionView], times: list[int]) -> np.ndarray:

@@ -11,10 +11,11 @@ from scipy.spatial import cKDTree
 from ....model.capture import Capture
 from ....model.joints import Joint
 from ....model.progress import QUIET, Progress
+from ....geometry.consistency import unsupported
 from ....geometry.rigid import StepData, fit_joint
 from .assemble import finite, make_joint, refine_fit, snap_to_front, view_meta
 from .cameras import make_views, step_cloud
-from .change import floaters, mark_changed, moving_at, vanish_times
+from .change import mark_changed, moving_at, vanish_times
 from .config import MotionConfig
 from .parts import group_parts
 from .track import track_part, visible_filter
@@ -38,7 +39,8 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
     views = make_views(capture, render_depth, cfg, robot_depth)
     pts = np.asarray(splat_means, float)[np.asarray(splat_opacity) >= cfg.min_opacity]
     spacing = float(np.median(cKDTree(pts).query(pts, k=2)[0][:, 1])) if len(pts) > 1 else 0.01
-    pts = pts[~floaters(pts, capture.static, max(cfg.min_threshold, 1.5 * spacing))]
+    pts = pts[~unsupported(pts, capture.static, max(cfg.min_threshold, 1.5 * spacing),
+                           cfg.noise_sigmas)]
     mark_changed(views, pts, spacing)
     first, count, earliest = vanish_times(pts, views, times, spacing)
     first[count < 2] = -1
