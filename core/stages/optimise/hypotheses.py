@@ -312,37 +312,50 @@ def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
 
 
 @torch.no_grad()
-def contradicted(model: ArticulatedSplat, frames, cfg) -> np.ndarray:
-    """Base Gaussians the frames contradict at two or more consecutive times: visible in the
-    render of the fitted model, yet the frame measures a surface clearly behind them or sees
-    background there (something that was there has moved away). Bool (N,)."""
+def unexplained(model: ArticulatedSplat, frames, cfg) -> np.ndarray:
+    """Base Gaussians where the frames show a change the model does not, at two consecutive
+    times: bool (T-1, N), row ``t`` for times ``t`` and ``t+1``.
+
+    A change is a pixel whose measurement differs from its camera's closed state
+    (:func:`.changes.frame_changes`); the model explains it where its own render at that time
+    differs from its closed render there (alpha, depth or colour). A base Gaussian is hit when
+    it is in front in the closed render at such a pixel: something that was there has moved.
+    """
+    from .changes import frame_changes
+    changed = frame_changes(frames)
     means = model.splat.means
     base = torch.as_tensor(model.labels() == 0, device=means.device)
-    unit = 0.01 * model.size
+    tol = cfg.sigma_depth * 0.01 * model.size
     hits = torch.zeros(len(frames.times), model.splat.n, dtype=torch.bool, device=means.device)
+    closed: dict[int, Any] = {}
     for i, ti in enumerate(frames.time_index):
-        if frames.times[ti] == 0:
+        if i not in changed:
             continue
         v = frames.levels[0][i]
-        r = model.render(v, ti, cfg.backend)
-        cam = means @ v.w2c[:3, :3].T + v.w2c[:3, 3]
-        z = cam[:, 2]
-        uv = cam[:, :2] / z.clamp_min(1e-6)[:, None] * v.K[[0, 1], [0, 1]] + v.K[:2, 2]
+        cam = frames.camera[i]
+        if cam not in closed:
+            closed[cam] = model.render(v, frames.times.index(0), cfg.backend)
+        r0, r = closed[cam], model.render(v, ti, cfg.backend)
+        moved = ((r.alpha - r0.alpha).abs() > 0.5) | ((r.depth - r0.depth).abs() > tol) | \
+            ((r.rgb - r0.rgb).abs().mean(-1) > 0.1)
+        flag = changed[i] & ~moved
+        cam_pts = means @ v.w2c[:3, :3].T + v.w2c[:3, 3]
+        z = cam_pts[:, 2]
+        uv = cam_pts[:, :2] / z.clamp_min(1e-6)[:, None] * v.K[[0, 1], [0, 1]] + v.K[:2, 2]
         px, py = uv[:, 0].floor().long(), uv[:, 1].floor().long()
         inside = (z > 0) & (px >= 0) & (py >= 0) & (px < v.width) & (py < v.height)
         px, py = px.clamp(0, v.width - 1), py.clamp(0, v.height - 1)
-        tol = max(cfg.sigma_depth * unit, cfg.noise_sigmas * v.depth_noise)
-        seen = inside & ((r.depth[py, px] - z).abs() < tol)
-        behind = v.depth_valid[py, px] & (v.depth[py, px] - z > 3 * tol)
-        wide = v.mask if v.mask_offsets is None else v.mask_offsets[-1]   # the widest mask
-        empty = wide[py, px] < 0.5
-        hits[ti] |= base & seen & (behind | empty)
-    return (hits[1:] & hits[:-1]).any(0).cpu().numpy()
+        front = inside & ((r0.depth[py, px] - z).abs() < tol)
+        hits[ti] |= base & front & flag[py, px]
+    return (hits[1:] & hits[:-1]).cpu().numpy()
 
 
-def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
-    """Connected groups of ``points`` (neighbours closer than 3 median neighbour distances),
-    largest first, each of at least ``min_size`` points; index arrays."""
+def clusters(points: np.ndarray, min_size: int, onset: np.ndarray | None = None,
+             link: int = 2) -> list[np.ndarray]:
+    """Connected groups of ``points`` (neighbours closer than 3 median neighbour distances and,
+    given ``onset`` per point, whose onsets differ by at most ``link`` time steps: parts that
+    start moving at different times are different parts), largest first, each of at least
+    ``min_size`` points; index arrays."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
@@ -351,6 +364,8 @@ def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
     tree = cKDTree(points)
     d = tree.query(points, 2)[0][:, 1]
     pairs = tree.query_pairs(3 * float(np.median(d)), output_type="ndarray")
+    if onset is not None and len(pairs):
+        pairs = pairs[np.abs(onset[pairs[:, 0]] - onset[pairs[:, 1]]) <= link]
     n = len(points)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, comp = connected_components(graph, directed=False)
@@ -358,19 +373,26 @@ def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
     return sorted([g for g in groups if len(g) >= min_size], key=len, reverse=True)
 
 
-def add_missed(run, share: float, tries: int = 2) -> list[str]:
-    """Missed parts: Gaussians of the base the frames contradict over consecutive times, grouped
-    into connected clusters (the ``tries`` largest with at least 1 % of the Gaussians), each
-    becomes a part hypothesis: hinges at its box edges and slides along its normal and box axes
-    are scored by rendering at its key time, the best is fitted, and the part is kept only if it
-    lowers the image loss over all frames. Returns the names of the added joints."""
+def add_missed(run, share: float, tries: int = 3) -> list[str]:
+    """Missed parts, one at a time: Gaussians of the base where the frames show changes the model
+    does not (:func:`unexplained`), grouped into connected clusters of like onset (at least 1 %
+    of the Gaussians); the largest becomes a part hypothesis: hinges at its box edges and slides
+    along its normal and box axes are scored by rendering at its key time, the best is fitted,
+    and the part is kept only if it lowers the image loss over all frames. A kept part explains
+    its changes (and those of what it hid), so the changes are found again before the next of
+    at most ``tries`` parts. Returns the names of the added joints."""
     model, frames, cfg = run.model, run.frames, run.cfg
-    flagged = np.flatnonzero(contradicted(model, frames, cfg))
     means = model.splat.means.cpu().numpy().astype(float)
-    groups = clusters(means[flagged], max(10, model.splat.n // 100))[:tries]
-    added = []
+    added: list[str] = []
     steps = max(run.options.iterations // 2, 1)
-    for g in groups:
+    for attempt in range(tries):
+        hits = unexplained(model, frames, cfg)
+        flagged = np.flatnonzero(hits.any(0))
+        onset = hits[:, flagged].argmax(0)
+        groups = clusters(means[flagged], max(10, model.splat.n // 100), onset)
+        if not groups:
+            break
+        g = groups[0]
         members = np.zeros(model.splat.n, bool)
         members[flagged[g]] = True
         before = float(evaluate(model, frames, cfg).mean())
@@ -391,18 +413,25 @@ def add_missed(run, share: float, tries: int = 2) -> list[str]:
             scored.append((score_at(model, frames, cfg, k, key, state_candidates(model, k))[0],
                            kind, axis, point))
             run.progress.check_cancel()
-        _, kind, axis, point = min(scored, key=lambda s: s[0])
-        model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
-        search_states(model, frames, k, cfg, state_candidates(model, k))
-        run.run_fit(steps, f"new part {name}", share / max(len(groups), 1),
-                    free=[i == k for i in range(model.k)], coarse=cfg.coarse)
+        fits = []   # the best-scoring hinge and slide, each fitted: the lower image loss wins
+        for kind in (REVOLUTE, PRISMATIC):
+            _, kind, axis, point = min((s for s in scored if s[1] == kind), key=lambda s: s[0])
+            model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+            search_states(model, frames, k, cfg, state_candidates(model, k))
+            run.run_fit(steps, f"new part {name} as {kind}", share / tries / 2,
+                        free=[i == k for i in range(model.k)], coarse=cfg.coarse)
+            fits.append((float(evaluate(model, frames, cfg).mean()), _snapshot(model)))
+        _restore(model, min(fits, key=lambda f: f[0])[1])
+        kind = model.types[k]
         after = float(evaluate(model, frames, cfg).mean())
-        run.progress.log(f"{name}: {len(g)} Gaussians the frames contradict; as a {kind} part "
-                         f"the image loss is {after:.5f} (without {before:.5f})")
+        run.progress.log(f"{name}: {len(g)} Gaussians where the frames change and the model "
+                         f"does not; as a {kind} part the image loss is {after:.5f} "
+                         f"(without {before:.5f})")
         if after < before * (1 - REMOVE_TOL):
             added.append(name)
         else:
             model.drop(k)
             run.trust = run.trust[:-1]
             _restore(model, kept)
+            break
     return added

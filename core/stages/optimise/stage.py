@@ -12,7 +12,8 @@ Steps (each fit is :func:`.fit.fit`):
 2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
 3. type by evidence, then spurious parts (:mod:`.hypotheses`);
 4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
-   missed parts from the Gaussians the frames contradict (:func:`.hypotheses.add_missed`);
+   missed parts where the frames change and the model does not (:func:`.hypotheses.add_missed`),
+   then, if any was added, step 4's fits again (at half length);
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
 5. report per joint residual, observed range and confidence.
 """
@@ -160,16 +161,15 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     if options.parts and model.k:
         removed = hypotheses.remove_spurious(run, locked=model.locked.tolist())
     run.done = 0.6
-    model.hard = None                                       # soft skinning from the box parts
-    run.run_fit(max(n // 2, 1), "joints and skinning", 0.25, lr_scale=0.3)
-    model.harden()
-    run.run_fit(max(n // 4, 1), "hardened", 0.1, lr_scale=0.1)
+    refine(run, n, share=0.28)
     added: list[str] = []
     if options.parts:
         added = hypotheses.add_missed(run, share=0.05)
     if added and options.types:   # the new parts' types by the same evidence
         evidence.update(hypotheses.select_types(run, share=0.0,
                                                 fixed=[name not in added for name in model.names]))
+    if added:                     # the new parts refined with the others
+        refine(run, n // 2, share=0.07)
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     losses = evaluate(model, frames, cfg)
     result = export(model, frames, joints, losses, evidence, cfg)
@@ -185,6 +185,15 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     write_labels(out / layout.PART_LABELS, model.labels())
     write_articulation(out / layout.ARTICULATION, articulation)
     return figures
+
+
+def refine(run: Runner, n: int, share: float) -> None:
+    """Joints, states and soft skinning together (``n/2`` steps, from the current parts), then
+    the assignment hardened (argmax) and a fine-tune (``n/4`` steps) at lower rates."""
+    run.model.hard = None
+    run.run_fit(max(n // 2, 1), "joints and skinning", share * 0.7, lr_scale=0.3)
+    run.model.harden()
+    run.run_fit(max(n // 4, 1), "hardened", share * 0.3, lr_scale=0.1)
 
 
 def camera_corrections(model: ArticulatedSplat) -> list[dict[str, float]]:
