@@ -350,12 +350,9 @@ def unexplained(model: ArticulatedSplat, frames, cfg) -> np.ndarray:
     return (hits[1:] & hits[:-1]).cpu().numpy()
 
 
-def clusters(points: np.ndarray, min_size: int, onset: np.ndarray | None = None,
-             link: int = 2) -> list[np.ndarray]:
-    """Connected groups of ``points`` (neighbours closer than 3 median neighbour distances and,
-    given ``onset`` per point, whose onsets differ by at most ``link`` time steps: parts that
-    start moving at different times are different parts), largest first, each of at least
-    ``min_size`` points; index arrays."""
+def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
+    """Connected groups of ``points`` (neighbours closer than 3 median neighbour distances),
+    largest first, each of at least ``min_size`` points; index arrays."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
@@ -364,8 +361,6 @@ def clusters(points: np.ndarray, min_size: int, onset: np.ndarray | None = None,
     tree = cKDTree(points)
     d = tree.query(points, 2)[0][:, 1]
     pairs = tree.query_pairs(3 * float(np.median(d)), output_type="ndarray")
-    if onset is not None and len(pairs):
-        pairs = pairs[np.abs(onset[pairs[:, 0]] - onset[pairs[:, 1]]) <= link]
     n = len(points)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, comp = connected_components(graph, directed=False)
@@ -373,10 +368,27 @@ def clusters(points: np.ndarray, min_size: int, onset: np.ndarray | None = None,
     return sorted([g for g in groups if len(g) >= min_size], key=len, reverse=True)
 
 
+def first_mover(points: np.ndarray, onset: np.ndarray, min_size: int, link: int = 2
+                ) -> np.ndarray | None:
+    """Of changed points (N,3) with the time step each started to change, the part that moves
+    first in the largest group: the group's most common onset within ``link`` steps, its largest
+    connected piece (parts side by side that move at different times are split; what a moving
+    part hid or uncovered starts with it and stays). Index array, or None."""
+    groups = clusters(points, min_size)
+    if not groups:
+        return None
+    g = groups[0]
+    mode = int(np.bincount(onset[g]).argmax())
+    sub = g[np.abs(onset[g] - mode) <= link]
+    pieces = clusters(points[sub], min_size)
+    return sub[pieces[0]] if pieces else None
+
+
 def add_missed(run, share: float, tries: int = 3) -> list[str]:
     """Missed parts, one at a time: Gaussians of the base where the frames show changes the model
-    does not (:func:`unexplained`), grouped into connected clusters of like onset (at least 1 %
-    of the Gaussians); the largest becomes a part hypothesis: hinges at its box edges and slides
+    does not (:func:`unexplained`), grouped into connected clusters (at least 1 % of the
+    Gaussians), of which the part that starts moving first (:func:`first_mover`) becomes a part
+    hypothesis: hinges at its box edges and slides
     along its normal and box axes are scored by rendering at its key time, the best is fitted,
     and the part is kept only if it lowers the image loss over all frames. A kept part explains
     its changes (and those of what it hid), so the changes are found again before the next of
@@ -388,11 +400,10 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     for attempt in range(tries):
         hits = unexplained(model, frames, cfg)
         flagged = np.flatnonzero(hits.any(0))
-        onset = hits[:, flagged].argmax(0)
-        groups = clusters(means[flagged], max(10, model.splat.n // 100), onset)
-        if not groups:
+        g = first_mover(means[flagged], hits[:, flagged].argmax(0),
+                        max(10, model.splat.n // 100))
+        if g is None:
             break
-        g = groups[0]
         members = np.zeros(model.splat.n, bool)
         members[flagged[g]] = True
         before = float(evaluate(model, frames, cfg).mean())
