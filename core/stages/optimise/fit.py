@@ -71,11 +71,12 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         rng: np.random.Generator, *, free: list[bool] | None = None,
         times: list[int] | None = None, prior: torch.Tensor | None = None,
         tick: Callable[[int, float], None] | None = None, coarse: float = 0.0,
-        lr_scale: float = 1.0) -> float:
+        lr_scale: float = 1.0, coarse_level: int | None = None) -> float:
     """Run ``steps`` Adam steps; returns the mean loss of the last quarter of them.
 
     ``free``: joints that move (default all; the camera corrections, when learnt, move only
-    then); ``times``: time indices to sample (default all);
+    then); ``times``: time indices to sample (default all); ``coarse_level``: the pyramid level
+    of the coarse phase (default the coarsest);
     ``prior``: per-joint strength of the pull towards the start; ``tick(step, loss)`` is called
     every step (progress and cancel); ``coarse``: fraction of the steps at the coarsest level;
     ``lr_scale``: multiplies the learning rates (refining phases start below the first fit's
@@ -95,7 +96,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     mask = torch.ones(model.k, device=dev) if free is None else \
         torch.tensor(free, dtype=torch.float32, device=dev)
     pool = list(range(len(frames.times))) if times is None else list(times)
-    coarse_level = len(frames.levels) - 1
+    coarse_level = len(frames.levels) - 1 if coarse_level is None else coarse_level
     n_coarse = int(coarse * steps)
     losses: list[float] = []
     for step in range(steps):
@@ -132,6 +133,27 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     model.load({k: v.detach() for k, v in opt.params.items()})
     tail = losses[-max(1, steps // 4):]
     return float(np.mean(tail))
+
+
+@torch.no_grad()
+def part_level(model: ArticulatedSplat, frames: FrameSet, k: int, min_pixels: int = 64) -> int:
+    """The coarsest pyramid level at which joint ``k``'s part still covers ``min_pixels`` pixels
+    (median over the frames of the pixels its Gaussians fall in at full resolution, a quarter per
+    level): below that a small part's motion is lost in the blur of the coarse phase."""
+    pts = model.splat.means[torch.as_tensor(model.labels() == k + 1, device=model.axes.device)]
+    counts = []
+    for v in frames.levels[0]:
+        cam = pts @ v.w2c[:3, :3].T + v.w2c[:3, 3]
+        z = cam[:, 2].clamp_min(1e-6)
+        u = (cam[:, 0] / z * v.K[0, 0] + v.K[0, 2]).floor().long()
+        w = (cam[:, 1] / z * v.K[1, 1] + v.K[1, 2]).floor().long()
+        ok = (cam[:, 2] > 0) & (u >= 0) & (w >= 0) & (u < v.width) & (w < v.height)
+        counts.append(len(torch.unique(w[ok] * v.width + u[ok])))
+    pixels = float(np.median(counts)) if counts else 0.0
+    level = 0
+    while level + 1 < len(frames.levels) and pixels / 4 ** (level + 1) >= min_pixels:
+        level += 1
+    return level
 
 
 @torch.no_grad()

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from .fit import evaluate, search_states
+from .fit import evaluate, part_level, search_states
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat
 
@@ -40,9 +40,12 @@ def _restore(model: ArticulatedSplat, snap: tuple) -> None:
     model.axes, model.origins, model.states = (t.clone() for t in snap[1:])
 
 
-def part_points(model: ArticulatedSplat, k: int, limit: int = 400) -> np.ndarray:
-    """Canonical means of part ``k``'s Gaussians (an even subsample of at most ``limit``)."""
-    pts = model.splat.means.cpu().numpy()[model.labels() == k + 1].astype(float)
+def part_points(model: ArticulatedSplat, k: int, limit: int = 400,
+                members: np.ndarray | None = None) -> np.ndarray:
+    """Canonical means of part ``k``'s Gaussians (or of ``members``, bool (N,)), an even
+    subsample of at most ``limit``."""
+    sel = model.labels() == k + 1 if members is None else members
+    pts = model.splat.means.cpu().numpy()[sel].astype(float)
     return pts[:: max(1, len(pts) // limit)]
 
 
@@ -111,20 +114,21 @@ def revolute_from_motion(pts: np.ndarray, posed: np.ndarray, axis: np.ndarray, p
     return np.array(values), err / len(posed)
 
 
-def alternatives(model: ArticulatedSplat, k: int) -> list[tuple[str, np.ndarray, np.ndarray,
-                                                               np.ndarray | None]]:
-    """Hypotheses of the other type for joint ``k``: (type, axis, point, values per time or None).
+def hypotheses_of(model: ArticulatedSplat, k: int, kind: str, members: np.ndarray | None = None
+                  ) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray | None]]:
+    """Joint ``k`` as a ``kind`` joint: (type, axis, point, values per time or None) each, made
+    from its part's Gaussians or from ``members`` (bool (N,), those seen moving) where given.
 
-    Revolute -> prismatic: the principal direction of the part's fitted mean displacements (with
-    its values), the part's mean surface normal (drawers slide along their front's normal), the
-    part box's and the object box's axes. Prismatic -> revolute: every edge of the part's
-    box as a hinge, with the per-time angles that best reproduce the fitted part positions.
+    Prismatic: the principal direction of the part's fitted mean displacements (with its
+    values), the part's mean surface normal (drawers slide along their front's normal), the
+    part box's and the object box's axes. Revolute: every edge of the part's box as a hinge,
+    with the per-time angles that best reproduce the fitted part positions.
     """
-    pts = part_points(model, k)
+    pts = part_points(model, k, members=members)
     if len(pts) < 10:
         return []
     posed = posed_part(model, k, pts)
-    if model.types[k] == REVOLUTE:
+    if kind == PRISMATIC:
         disp = (posed - pts[None]).mean(1)                        # (T,3) best translations
         _, _, vt = np.linalg.svd(disp, full_matrices=False)
         axis = vt[0]
@@ -193,14 +197,16 @@ def key_time(model: ArticulatedSplat, frames, cfg, k: int) -> int:
 
 
 def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[str, dict[str, Any]]:
-    """Keep, per joint, the type whose fit explains the frames where it moves better.
+    """Keep, per joint, the type and line whose fit explains the frames where it moves best.
 
-    ``fixed`` joints (trusted user joints, locked joints) keep their type. Each alternative
-    (:func:`alternatives`) is scored by rendering at half resolution at the time the part
-    moves most (its value searched); the best one gets its states searched at every time, is
-    fitted coarse-to-fine with only this joint free, and is kept
-    if its image loss over the frames where the part moves is lower. Returns per joint the evidence:
-    both losses, the kept type and the relative margin.
+    ``fixed`` joints (trusted user joints, locked joints) keep their type and line. The joint's
+    hypotheses of both types (:func:`hypotheses_of`) are scored by rendering at half resolution
+    at the time the part moves most (its value searched). The best of the other type is fitted
+    (states searched at every time, coarse-to-fine with only this joint free), and so is the
+    best of the joint's own type when it scores better than the joint itself (a hinge proposed
+    on the wrong edge); the fit with the lowest image loss over the frames where the part moves
+    is kept. Returns per joint the evidence: each type's loss, the kept type and the relative
+    margin between the types.
     """
     model, frames, cfg = run.model, run.frames, run.cfg
     evidence: dict[str, dict[str, Any]] = {}
@@ -209,40 +215,142 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
     for k in todo:
         name = model.names[k]
         ids = moving_frames(model, frames, k)
-        hyps = alternatives(model, k)
-        if not ids or not hyps:
+        own = model.types[k]
+        other = PRISMATIC if own == REVOLUTE else REVOLUTE
+        core = seen_moving(model, frames, cfg, k)
+        hyps = {t: hypotheses_of(model, k, t, core)[:tries] for t in (own, other)}
+        if not ids or not hyps[other]:
             run.done += share / len(todo)
             continue
         kept = _snapshot(model)
         here = float(evaluate(model, frames, cfg, 0, ids).mean())
         key = key_time(model, frames, cfg, k)
-        scored = []
-        for kind, axis, point, values in hyps[:tries]:
+        unit = model.unit_of(own)
+        current = score_at(model, frames, cfg, k, key,
+                           np.array([float(model.states[k, key]) * unit]))[0]
+        _restore(model, kept)
+        best: dict[str, tuple] = {}
+        for kind, options in hyps.items():
+            for _, axis, point, values in options:
+                model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+                grid = state_candidates(model, k)
+                if values is not None:
+                    grid = np.append(grid, values[key])
+                loss = score_at(model, frames, cfg, k, key, grid)[0]
+                if kind not in best or loss < best[kind][0]:
+                    best[kind] = (loss, axis, point)
+                _restore(model, kept)
+                run.progress.check_cancel()
+        fitted = [(here, kept)]
+        losses = {own: here}
+        for kind in (other, own):
+            if kind not in best or (kind == own and best[kind][0] >= current):
+                continue
+            _, axis, point = best[kind]
             model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
-            grid = state_candidates(model, k)
-            if values is not None:
-                grid = np.append(grid, values[key])
-            loss, value = score_at(model, frames, cfg, k, key, grid)
-            scored.append((loss, axis, point, values))
+            search_states(model, frames, k, cfg, state_candidates(model, k))
+            label = f"{name} as {kind}" if kind != own else f"{name} restarted"
+            run.run_fit(steps, label, share / len(todo) / 2,
+                        free=[i == k for i in range(model.k)], coarse=cfg.coarse,
+                        coarse_level=part_level(model, frames, k))
+            there = float(evaluate(model, frames, cfg, 0, ids).mean())
+            fitted.append((there, _snapshot(model)))
+            losses[kind] = min(losses.get(kind, np.inf), there)
             _restore(model, kept)
-            run.progress.check_cancel()
-        _, axis, point, values = min(scored, key=lambda s: s[0])
-        kind = hyps[0][0]
-        model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
-        search_states(model, frames, k, cfg, state_candidates(model, k))
-        run.run_fit(steps, f"{name} as {kind}", share / len(todo),
-                    free=[i == k for i in range(model.k)], coarse=cfg.coarse)
-        there = float(evaluate(model, frames, cfg, 0, ids).mean())
-        losses = {kept[0][k]: here, kind: there}
-        if there >= here:
-            _restore(model, kept)
-        best = model.types[k]
-        margin = (max(here, there) - min(here, there)) / max(min(here, there), 1e-12)
+        _restore(model, min(fitted, key=lambda f: f[0])[1])
+        kind = model.types[k]
+        lo, hi = min(losses.values()), max(losses.values())
+        margin = (hi - lo) / max(lo, 1e-12)
         evidence[name] = {f"loss_{t}": round(v, 6) for t, v in losses.items()}
-        evidence[name].update(type=best, margin=round(margin, 6))
-        run.progress.log(f"{name}: {best} (image loss {losses[REVOLUTE]:.4f} revolute, "
-                         f"{losses[PRISMATIC]:.4f} prismatic)")
+        evidence[name].update(type=kind, margin=round(margin, 6))
+        run.progress.log(f"{name}: {kind} (image loss " + ", ".join(
+            f"{v:.4f} {t}" for t, v in losses.items()) + ")")
     return evidence
+
+
+@torch.no_grad()
+def seen_static(model: ArticulatedSplat, frames, cfg, k: int, pixels: float = 2.0) -> np.ndarray:
+    """Gaussians of joint ``k``'s part that the frames show staying put: in front in the closed
+    render, moved by the joint by ``pixels`` or more on the image at a time, yet their pixel is
+    unchanged from the camera's closed state (:func:`.changes.frame_changes`) at two or more
+    such times and never changed. Gaussians no camera sees give no evidence and are not
+    listed. Bool (N,)."""
+    from .changes import frame_changes
+    changed = frame_changes(frames)
+    means = model.splat.means
+    part = torch.as_tensor(model.labels() == k + 1, device=means.device)
+    tol = cfg.sigma_depth * 0.01 * model.size
+    still = torch.zeros(model.splat.n, dtype=torch.long, device=means.device)
+    moved = torch.zeros(model.splat.n, dtype=torch.bool, device=means.device)
+    closed: dict[int, Any] = {}
+    for i, ti in enumerate(frames.time_index):
+        if i not in changed:
+            continue
+        v = frames.levels[0][i]
+        cam = frames.camera[i]
+        if cam not in closed:
+            closed[cam] = model.render(v, frames.times.index(0), cfg.backend)
+        r0 = closed[cam]
+        (px, py), z, inside = _project(v, means)
+        (qx, qy), _, _ = _project(v, model.posed(ti)[0])
+        gap = z - r0.depth[py, px]
+        band = max(tol, 3 * layer_spread(gap[inside & (gap < 0)])) + surface_slope(r0.depth)
+        front = part & inside & (gap.abs() < band[py, px])
+        shift = ((qx - px) ** 2 + (qy - py) ** 2).float().sqrt() >= pixels
+        here = changed[i][py, px]
+        still += (front & shift & ~here).long()
+        moved |= front & here
+    return ((still >= 2) & ~moved).cpu().numpy()
+
+
+def _project(v, pts: torch.Tensor) -> tuple[tuple[torch.Tensor, torch.Tensor], torch.Tensor,
+                                            torch.Tensor]:
+    """Pixel (column, row) of world points in view ``v`` (clamped into the image), their depth,
+    and whether they fall inside the image in front of the camera."""
+    cam = pts @ v.w2c[:3, :3].T + v.w2c[:3, 3]
+    z = cam[:, 2]
+    uv = cam[:, :2] / z.clamp_min(1e-6)[:, None] * v.K[[0, 1], [0, 1]] + v.K[:2, 2]
+    px, py = uv[:, 0].floor().long(), uv[:, 1].floor().long()
+    inside = (z > 0) & (px >= 0) & (py >= 0) & (px < v.width) & (py < v.height)
+    return (px.clamp(0, v.width - 1), py.clamp(0, v.height - 1)), z, inside
+
+
+def seen_moving(model: ArticulatedSplat, frames, cfg, k: int, share: float = 0.1
+                ) -> np.ndarray | None:
+    """Gaussians of joint ``k``'s part where the frames show a change that the model with this
+    joint at rest does not (:func:`unexplained`): the part's Gaussians seen moving, the ones to
+    draw its hypotheses from (a part's box also holds what no camera sees). None when fewer
+    than ``share`` of the part (no evidence)."""
+    part = model.labels() == k + 1
+    snap = _snapshot(model)
+    with torch.no_grad():
+        model.states = model.states.clone()
+        model.states[k] = 0.0
+    core = unexplained(model, frames, cfg, part).any(0) & part
+    _restore(model, snap)
+    return core if core.sum() >= max(10, share * part.sum()) else None
+
+
+def trim_parts(run, locked: list[bool]) -> dict[str, int]:
+    """Each unlocked joint's part (its proposal's box) gives to the base the Gaussians the frames
+    show staying put where the joint would move them (:func:`seen_static`): a box drawn around
+    a door also holds the cabinet's front beside it, and hypotheses made from such a part hinge
+    on the wrong edges. Gaussians no camera sees stay. The soft skinning later gives back to a
+    part what moves with it. Returns per joint the Gaussians moved to the base."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    moved: dict[str, int] = {}
+    for k in range(model.k):
+        if locked[k]:
+            continue
+        part = model.labels() == k + 1
+        drop = seen_static(model, frames, cfg, k) & part
+        if not drop.any() or drop.sum() > 0.9 * part.sum():   # nothing, or the joint is wrong
+            continue
+        model.reassign(drop, 0)
+        moved[model.names[k]] = int(drop.sum())
+        run.progress.log(f"{model.names[k]}: {int(drop.sum())} of {int(part.sum())} Gaussians of "
+                         f"its box stay put in the frames; given to the base")
+    return moved
 
 
 def remove_spurious(run, locked: list[bool]) -> list[str]:
@@ -311,20 +419,42 @@ def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
     return kept
 
 
+def surface_slope(depth: torch.Tensor) -> torch.Tensor:
+    """Per pixel, the largest depth step to a 4-neighbour where both are rendered (0 = nothing):
+    how deep a surface seen at a grazing angle reaches within one pixel."""
+    d = torch.nn.functional.pad(depth[None, None], (1, 1, 1, 1), mode="replicate")[0, 0]
+    c = d[1:-1, 1:-1]
+    steps = [(n - c).abs() * ((n > 0) & (c > 0)) for n in (d[:-2, 1:-1], d[2:, 1:-1],
+                                                              d[1:-1, :-2], d[1:-1, 2:])]
+    return torch.stack(steps).amax(0)
+
+
+def layer_spread(ahead: torch.Tensor) -> float:
+    """Spread (one sigma, m) of a splat's Gaussians about the surface it renders, from the
+    distances by which Gaussians lie in front of the rendered depth (``ahead``, negative; nothing
+    but the front layer itself is in front of it); a splat made from noisy depth is centimetres
+    thick. 0 without any."""
+    return 1.4826 * float(ahead.abs().median()) if len(ahead) else 0.0
+
+
 @torch.no_grad()
-def unexplained(model: ArticulatedSplat, frames, cfg) -> np.ndarray:
-    """Base Gaussians where the frames show a change the model does not, at two consecutive
-    times: bool (T-1, N), row ``t`` for times ``t`` and ``t+1``.
+def unexplained(model: ArticulatedSplat, frames, cfg, candidates: np.ndarray | None = None
+                ) -> np.ndarray:
+    """Base Gaussians (or ``candidates``, bool (N,)) where the frames show a change the model
+    does not, at two consecutive times: bool (T-1, N), row ``t`` for times ``t`` and ``t+1``.
 
     A change is a pixel whose measurement differs from its camera's closed state
     (:func:`.changes.frame_changes`); the model explains it where its own render at that time
     differs from its closed render there (alpha, depth or colour). A base Gaussian is hit when
-    it is in front in the closed render at such a pixel: something that was there has moved.
+    it is in front in the closed render at such a pixel (within the splat's own spread about
+    its surfaces, :func:`layer_spread`, plus the surface's depth step to the next pixel,
+    :func:`surface_slope`): something that was there has moved.
     """
     from .changes import frame_changes
     changed = frame_changes(frames)
     means = model.splat.means
-    base = torch.as_tensor(model.labels() == 0, device=means.device)
+    base = torch.as_tensor(model.labels() == 0 if candidates is None else candidates,
+                           device=means.device)
     tol = cfg.sigma_depth * 0.01 * model.size
     hits = torch.zeros(len(frames.times), model.splat.n, dtype=torch.bool, device=means.device)
     closed: dict[int, Any] = {}
@@ -339,13 +469,10 @@ def unexplained(model: ArticulatedSplat, frames, cfg) -> np.ndarray:
         moved = ((r.alpha - r0.alpha).abs() > 0.5) | ((r.depth - r0.depth).abs() > tol) | \
             ((r.rgb - r0.rgb).abs().mean(-1) > 0.1)
         flag = changed[i] & ~moved
-        cam_pts = means @ v.w2c[:3, :3].T + v.w2c[:3, 3]
-        z = cam_pts[:, 2]
-        uv = cam_pts[:, :2] / z.clamp_min(1e-6)[:, None] * v.K[[0, 1], [0, 1]] + v.K[:2, 2]
-        px, py = uv[:, 0].floor().long(), uv[:, 1].floor().long()
-        inside = (z > 0) & (px >= 0) & (py >= 0) & (px < v.width) & (py < v.height)
-        px, py = px.clamp(0, v.width - 1), py.clamp(0, v.height - 1)
-        front = inside & ((r0.depth[py, px] - z).abs() < tol)
+        (px, py), z, inside = _project(v, means)
+        gap = z - r0.depth[py, px]
+        band = max(tol, 3 * layer_spread(gap[inside & (gap < 0)])) + surface_slope(r0.depth)
+        front = inside & (gap.abs() < band[py, px])
         hits[ti] |= base & front & flag[py, px]
     return (hits[1:] & hits[:-1]).cpu().numpy()
 
@@ -424,25 +551,60 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             scored.append((score_at(model, frames, cfg, k, key, state_candidates(model, k))[0],
                            kind, axis, point))
             run.progress.check_cancel()
-        fits = []   # the best-scoring hinge and slide, each fitted: the lower image loss wins
-        for kind in (REVOLUTE, PRISMATIC):
-            _, kind, axis, point = min((s for s in scored if s[1] == kind), key=lambda s: s[0])
+        # the best-scoring hypothesis is fitted; if it does not explain the frames better, the
+        # best of the other type is (a small part's score at one time can mislead)
+        order = sorted(scored, key=lambda s: s[0])
+        first = order[0][1]
+        second = [s for s in order if s[1] != first][:1]
+        for _, kind, axis, point in order[:1] + second:
             model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
             search_states(model, frames, k, cfg, state_candidates(model, k))
             run.run_fit(steps, f"new part {name} as {kind}", share / tries / 2,
-                        free=[i == k for i in range(model.k)], coarse=cfg.coarse)
-            fits.append((float(evaluate(model, frames, cfg).mean()), _snapshot(model)))
-        _restore(model, min(fits, key=lambda f: f[0])[1])
-        kind = model.types[k]
-        after = float(evaluate(model, frames, cfg).mean())
+                        free=[i == k for i in range(model.k)], coarse=cfg.coarse,
+                        coarse_level=part_level(model, frames, k))
+            after = float(evaluate(model, frames, cfg).mean())
+            if after < before * (1 - REMOVE_TOL):
+                break
         run.progress.log(f"{name}: {len(g)} Gaussians where the frames change and the model "
                          f"does not; as a {kind} part the image loss is {after:.5f} "
                          f"(without {before:.5f})")
-        if after < before * (1 - REMOVE_TOL):
-            added.append(name)
-        else:
+        if after >= before * (1 - REMOVE_TOL):
             model.drop(k)
             run.trust = run.trust[:-1]
             _restore(model, kept)
             break
+        into = merge_target(model, frames, cfg, k, after)
+        if into is None:
+            added.append(name)
+            continue
+        run.progress.log(f"{name}: moves with {model.names[into]}; merged into its part")
+        fitted = _snapshot(model)
+        model.reassign(model.labels() == k + 1, into + 1)
+        model.drop(k)
+        run.trust = run.trust[:-1]
+        _restore(model, (fitted[0][:-1], fitted[1][:-1], fitted[2][:-1], fitted[3][:-1]))
     return added
+
+
+@torch.no_grad()
+def merge_target(model: ArticulatedSplat, frames, cfg, k: int, loss: float) -> int | None:
+    """The joint of the same type whose motion explains joint ``k``'s part as well as ``k`` does
+    (within ``REMOVE_TOL`` of ``loss``, the image loss over all frames): a new part that is the
+    rest of an existing one (Gaussians its box missed) is merged into it. None if none."""
+    best = None
+    hard = model.hard.clone()
+    members = torch.as_tensor(model.labels() == k + 1, device=hard.device)
+    for j in range(model.k):
+        if j == k or model.types[j] != model.types[k]:
+            continue
+        h = hard.clone()
+        h[members] = j + 1
+        model.hard = h
+        states = model.states.clone()
+        model.states = states.clone()
+        model.states[k] = 0.0
+        merged = float(evaluate(model, frames, cfg).mean())
+        model.states, model.hard = states, hard
+        if merged <= loss * (1 + REMOVE_TOL) and (best is None or merged < best[0]):
+            best = (merged, j)
+    return None if best is None else best[1]

@@ -248,6 +248,19 @@ class ArticulatedSplat:
                            else values, float)
             self.states[k] = torch.as_tensor(v / self.unit_of(kind), dtype=torch.float32)
 
+    def reassign(self, members: np.ndarray, label: int) -> None:
+        """Give the Gaussians ``members`` (bool, N) to part ``label`` (0 = base), in the hard
+        assignment (if any) and the logits."""
+        m = torch.as_tensor(members, device=self.logits.device)
+        with torch.no_grad():
+            self.logits = self.logits.detach().clone()
+            self.logits[m] = 0.0
+            self.logits[m, label] = HARD_LOGIT
+            if self.hard is not None:
+                h = self.hard.clone()
+                h[m] = label
+                self.hard = h
+
     def drop(self, k: int) -> None:
         """Remove joint ``k``; its Gaussians join the base."""
         keep = [i for i in range(self.k) if i != k]

@@ -8,7 +8,8 @@ behind them). Nothing is written before the end: a cancel or a failure leaves OU
 
 Steps (each fit is :func:`.fit.fit`):
 1. start from the proposals: part of each Gaussian from the joints' ``extent`` boxes; states
-   from the proposal or, where it has none, a search per time;
+   from the proposal or, where it has none, a search per time; each part trimmed to the
+   Gaussians where the frames show it changing (:func:`.hypotheses.trim_parts`);
 2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
 3. type by evidence, then spurious parts (:mod:`.hypotheses`);
 4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
@@ -151,6 +152,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     for k, j in enumerate(joints):
         if not j.states:
             search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
+    trimmed = hypotheses.trim_parts(run, locked=model.locked.tolist()) if options.parts else {}
     run.run_fit(n, "joints", 0.25, coarse=cfg.coarse)
     evidence: dict[str, dict[str, Any]] = {}
     if options.types and model.k:
@@ -178,6 +180,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                                          "loss": float(losses.mean()), "removed": removed,
                                          "added": added})
     figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
+               "trimmed": trimmed,
                "cameras": camera_corrections(model),
                "kept_start": kept_start, "added": added,
                "types": [j.type for j in result],
