@@ -205,8 +205,8 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
     (states searched at every time, coarse-to-fine with only this joint free), and so is the
     best of the joint's own type when it scores better than the joint itself (a hinge proposed
     on the wrong edge); the fit with the lowest image loss over the frames where the part moves
-    is kept. Returns per joint the evidence: each type's loss, the kept type and the relative
-    margin between the types.
+    is kept. Returns per joint the evidence: each type's loss, the kept type, the relative
+    margin between the types and whether a restart of its own type was kept.
     """
     model, frames, cfg = run.model, run.frames, run.cfg
     evidence: dict[str, dict[str, Any]] = {}
@@ -241,7 +241,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
                     best[kind] = (loss, axis, point)
                 _restore(model, kept)
                 run.progress.check_cancel()
-        fitted = [(here, kept)]
+        fitted = [(here, kept, False)]
         losses = {own: here}
         for kind in (other, own):
             if kind not in best or (kind == own and best[kind][0] >= current):
@@ -254,17 +254,19 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
                         free=[i == k for i in range(model.k)], coarse=cfg.coarse,
                         coarse_level=part_level(model, frames, k))
             there = float(evaluate(model, frames, cfg, 0, ids).mean())
-            fitted.append((there, _snapshot(model)))
+            fitted.append((there, _snapshot(model), kind == own))
             losses[kind] = min(losses.get(kind, np.inf), there)
             _restore(model, kept)
-        _restore(model, min(fitted, key=lambda f: f[0])[1])
+        _, snap, restarted = min(fitted, key=lambda f: f[0])
+        _restore(model, snap)
         kind = model.types[k]
         lo, hi = min(losses.values()), max(losses.values())
         margin = (hi - lo) / max(lo, 1e-12)
         evidence[name] = {f"loss_{t}": round(v, 6) for t, v in losses.items()}
-        evidence[name].update(type=kind, margin=round(margin, 6))
-        run.progress.log(f"{name}: {kind} (image loss " + ", ".join(
-            f"{v:.4f} {t}" for t, v in losses.items()) + ")")
+        evidence[name].update(type=kind, margin=round(margin, 6), restarted=restarted)
+        run.progress.log(f"{name}: {kind}{' (restarted from a box edge)' if restarted else ''}"
+                         " (image loss " + ", ".join(f"{v:.4f} {t}" for t, v in losses.items())
+                         + ")")
     return evidence
 
 
