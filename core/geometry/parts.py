@@ -59,3 +59,17 @@ def _box(joint: Joint) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise ArtgsError(f"joint '{joint.name}', field 'extent': axes must be non-zero and "
                          f"half_size non-negative, all finite")
     return center, axes / norms[:, None], half
+
+
+def handle_point(S: np.ndarray, fit, n: np.ndarray) -> np.ndarray:
+    """Where to grasp the part ``S`` (its points in the closed state) moved by ``fit`` (anything
+    with ``type``, ``axis``, ``origin``, e.g. a Joint): on a revolute part, its band farthest
+    from the axis (outer 15 % of the radius), on a prismatic one the whole front; there, the
+    most protruding points along the front normal ``n`` (a handle sticks out), averaged."""
+    band = S
+    if fit.type == "revolute":
+        rel = S - fit.origin
+        radius = np.linalg.norm(rel - np.outer(rel @ fit.axis, fit.axis), axis=1)
+        band = S[radius >= 0.85 * np.percentile(radius, 99)]
+    height = band @ n
+    return band[height >= np.percentile(height, 95)].mean(axis=0)

@@ -298,13 +298,29 @@ def seen_static(model: ArticulatedSplat, frames, cfg, k: int, pixels: float = 2.
     unchanged from the camera's closed state (:func:`.changes.frame_changes`) at two or more
     such times and never changed. Gaussians no camera sees give no evidence and are not
     listed. Bool (N,)."""
+    means = model.splat.means
+    part = torch.as_tensor(model.labels() == k + 1, device=means.device)
+    still = torch.zeros(model.splat.n, dtype=torch.long, device=means.device)
+    moved = torch.zeros(model.splat.n, dtype=torch.bool, device=means.device)
+    for ti, v, _, change, (px, py), front in closed_views(model, frames, cfg):
+        (qx, qy), _, _ = _project(v, model.posed(ti)[0])
+        shift = ((qx - px) ** 2 + (qy - py) ** 2).float().sqrt() >= pixels
+        here = change[py, px]
+        still += (part & front & shift & ~here).long()
+        moved |= part & front & here
+    return ((still >= 2) & ~moved).cpu().numpy()
+
+
+def closed_views(model: ArticulatedSplat, frames, cfg):
+    """Per frame that has a change map (:func:`.changes.frame_changes`): its time index, view,
+    its camera's closed render, the change map, every Gaussian's pixel (column, row) and whether
+    the Gaussian is in front in the closed render (within the splat's own spread about its
+    surfaces, :func:`layer_spread`, plus the surface's depth step to the next pixel,
+    :func:`surface_slope`)."""
     from .changes import frame_changes
     changed = frame_changes(frames)
     means = model.splat.means
-    part = torch.as_tensor(model.labels() == k + 1, device=means.device)
     tol = cfg.sigma_depth * 0.01 * model.size
-    still = torch.zeros(model.splat.n, dtype=torch.long, device=means.device)
-    moved = torch.zeros(model.splat.n, dtype=torch.bool, device=means.device)
     closed: dict[int, Any] = {}
     for i, ti in enumerate(frames.time_index):
         if i not in changed:
@@ -315,15 +331,9 @@ def seen_static(model: ArticulatedSplat, frames, cfg, k: int, pixels: float = 2.
             closed[cam] = model.render(v, frames.times.index(0), cfg.backend)
         r0 = closed[cam]
         (px, py), z, inside = _project(v, means)
-        (qx, qy), _, _ = _project(v, model.posed(ti)[0])
         gap = z - r0.depth[py, px]
         band = max(tol, 3 * layer_spread(gap[inside & (gap < 0)])) + surface_slope(r0.depth)
-        front = part & inside & (gap.abs() < band[py, px])
-        shift = ((qx - px) ** 2 + (qy - py) ** 2).float().sqrt() >= pixels
-        here = changed[i][py, px]
-        still += (front & shift & ~here).long()
-        moved |= front & here
-    return ((still >= 2) & ~moved).cpu().numpy()
+        yield ti, v, r0, changed[i], (px, py), inside & (gap.abs() < band[py, px])
 
 
 def _project(v, pts: torch.Tensor) -> tuple[tuple[torch.Tensor, torch.Tensor], torch.Tensor,
@@ -472,34 +482,19 @@ def unexplained(model: ArticulatedSplat, frames, cfg, candidates: np.ndarray | N
     A change is a pixel whose measurement differs from its camera's closed state
     (:func:`.changes.frame_changes`); the model explains it where its own render at that time
     differs from its closed render there (alpha, depth or colour). A base Gaussian is hit when
-    it is in front in the closed render at such a pixel (within the splat's own spread about
-    its surfaces, :func:`layer_spread`, plus the surface's depth step to the next pixel,
-    :func:`surface_slope`): something that was there has moved.
+    it is in front in the closed render at such a pixel (:func:`closed_views`): something that
+    was there has moved.
     """
-    from .changes import frame_changes
-    changed = frame_changes(frames)
     means = model.splat.means
     base = torch.as_tensor(model.labels() == 0 if candidates is None else candidates,
                            device=means.device)
     tol = cfg.sigma_depth * 0.01 * model.size
     hits = torch.zeros(len(frames.times), model.splat.n, dtype=torch.bool, device=means.device)
-    closed: dict[int, Any] = {}
-    for i, ti in enumerate(frames.time_index):
-        if i not in changed:
-            continue
-        v = frames.levels[0][i]
-        cam = frames.camera[i]
-        if cam not in closed:
-            closed[cam] = model.render(v, frames.times.index(0), cfg.backend)
-        r0, r = closed[cam], model.render(v, ti, cfg.backend)
+    for ti, v, r0, change, (px, py), front in closed_views(model, frames, cfg):
+        r = model.render(v, ti, cfg.backend)
         moved = ((r.alpha - r0.alpha).abs() > 0.5) | ((r.depth - r0.depth).abs() > tol) | \
             ((r.rgb - r0.rgb).abs().mean(-1) > 0.1)
-        flag = changed[i] & ~moved
-        (px, py), z, inside = _project(v, means)
-        gap = z - r0.depth[py, px]
-        band = max(tol, 3 * layer_spread(gap[inside & (gap < 0)])) + surface_slope(r0.depth)
-        front = inside & (gap.abs() < band[py, px])
-        hits[ti] |= base & front & flag[py, px]
+        hits[ti] |= base & front & (change & ~moved)[py, px]
     return (hits[1:] & hits[:-1]).cpu().numpy()
 
 

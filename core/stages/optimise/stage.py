@@ -14,7 +14,7 @@ Steps (each fit is :func:`.fit.fit`):
 3. type by evidence, then spurious parts (:mod:`.hypotheses`);
 4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
    missed parts where the frames change and the model does not (:func:`.hypotheses.add_missed`),
-   then, if any was added, step 4's fits again (at half length);
+   then, if any was added, step 4's fits again (at half length) and the spurious-part test;
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
 5. report per joint residual, observed range and confidence.
 """
@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from ...geometry.parts import assign_parts
+from ...geometry.parts import assign_parts, handle_point
 from ...model import atomic, layout, registry
 from ...model.capture import TRANSFORMS, Capture
 from ...model.errors import InputError
@@ -170,8 +170,11 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     if added and options.types:   # the new parts' types by the same evidence
         evidence.update(hypotheses.select_types(run, share=0.0,
                                                 fixed=[name not in added for name in model.names]))
-    if added:                     # the new parts refined with the others
+    if added:                     # the new parts refined with the others, then tested again
         refine(run, n // 2, share=0.07)
+        again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
+        removed += [name for name in again if name not in added]
+        added = [name for name in added if name not in again]
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     losses = evaluate(model, frames, cfg)
     result = export(model, frames, joints, losses, evidence, cfg)
@@ -263,6 +266,8 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             confidence *= min(1.0, 0.5 + 5.0 * max(margin, 0.0))
         if warnings:
             confidence *= 0.5
+        handle = src.handle if src is not None and src.handle else \
+            grasp(model, k, pts, axis, origin, means)
         extra = dict(src.extra) if src is not None else {}
         extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
                      evidence=ev, warnings=warnings)
@@ -271,9 +276,25 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             parent=src.parent if src else "base", child=src.child if src else f"{name}_link",
             states=states, source=src.source if src else "optimise",
             confidence=round(float(confidence), 4), bbox=src.bbox if src else None,
-            handle=src.handle if src else None, extent=part_box(pts) if len(pts) else
+            handle=handle, extent=part_box(pts) if len(pts) else
             (src.extent if src else None), extra=extra))
     return result
+
+
+def grasp(model: ArticulatedSplat, k: int, pts: np.ndarray, axis: np.ndarray,
+          origin: np.ndarray, means: np.ndarray) -> dict[str, Any] | None:
+    """A handle for a joint its proposal gave none (a part the optimisation added): the grasp
+    point of :func:`handle_point` on the part's front (its mean normal, turned away from the
+    object's centre), approached against that normal. None for a part without Gaussians."""
+    from .hypotheses import part_normal
+    if len(pts) < 3:
+        return None
+    n = part_normal(model, k)
+    if (pts.mean(0) - means.mean(0)) @ n < 0:
+        n = -n
+    joint = Joint(name=model.names[k], type=model.types[k], axis=axis, origin=origin)
+    return {"point": [float(x) for x in handle_point(pts, joint, n)],
+            "approach": [float(x) for x in -n]}
 
 
 def part_box(points: np.ndarray) -> dict[str, Any]:

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ....model.joints import Joint, joint_transform
+from ....geometry.parts import handle_point
 from ....geometry.rigid import StepData, apply, invert, refine_joint, tukey_weights
 from .cameras import InteractionView
 from .config import MotionConfig
@@ -100,19 +101,6 @@ def make_joint(k: int, fit, values: dict[int, float], moving: list[int], S: np.n
                  origin=fit.origin if fit.type == "revolute" else centre,
                  limit=(lo, hi), states=values, source="motion", confidence=confidence,
                  bbox=bbox, handle=handle, extent=extent)
-
-
-def handle_point(S: np.ndarray, fit, n: np.ndarray) -> np.ndarray:
-    """Where to grasp the part (closed state): on a revolute part, its band farthest from the axis
-    (outer 15 % of the radius), on a prismatic one the whole front; there, the most protruding
-    points along the front normal ``n`` (a handle sticks out), averaged."""
-    band = S
-    if fit.type == "revolute":
-        rel = S - fit.origin
-        radius = np.linalg.norm(rel - np.outer(rel @ fit.axis, fit.axis), axis=1)
-        band = S[radius >= 0.85 * np.percentile(radius, 99)]
-    height = band @ n
-    return band[height >= np.percentile(height, 95)].mean(axis=0)
 
 
 def _corners(c: np.ndarray, axes: np.ndarray, half: np.ndarray) -> np.ndarray:
