@@ -5,8 +5,8 @@ generated into a temporary folder, or ``--data DIR``):
 the static splat (depth-initialised, or reconstructed for ``--iterations``), the motion route's
 proposals (core.stages.propose), then the optimisation (core.stages.optimise); both scored against
 ``gt.json`` (core.geometry.metrics.match_joints). Prints per category: joints, type accuracy, AE
-mean/worst (deg), OE mean/worst (cm, revolute joints) before -> after, and seconds of
-optimisation per object; then the basin rate: from ``--basin`` starts per capture made from the
+mean/worst (deg), OE mean/worst (cm, revolute joints) before -> after, and wall and CPU seconds
+of optimisation per object; then the basin rate: from ``--basin`` starts per capture made from the
 ground truth with the axis turned by 10–30° and the line moved by 5–15 cm, the share of joints
 that end within 1° and 1 cm.
 """
@@ -76,12 +76,13 @@ def bench_capture(capture_dir: Path, work: Path, options, iterations: int = 0, b
     except NothingFound:   # the motion route found nothing: the optimisation starts from no joints
         proposals = Articulation([], {"source": "motion"})
         write_articulation(out / layout.PROPOSALS, proposals)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     optimise(out, capture, QUIET, options)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     after = read_articulation(out / layout.ARTICULATION)
     category = gt.meta.get("category", capture_dir.name)
     result = {"capture": capture_dir.name, "category": category, "seconds": seconds,
+              "cpu_seconds": cpu,
               "before": _scores(proposals.joints, gt.joints),
               "after": _scores(after.joints, gt.joints), "basin": []}
     rng = np.random.default_rng([seed, len(capture_dir.name)])
@@ -94,11 +95,13 @@ def bench_capture(capture_dir: Path, work: Path, options, iterations: int = 0, b
 
 
 def format_table(before: list[dict], after: list[dict]) -> str:
-    """Per category: joints, type %, AE mean/worst, OE mean/worst before -> after, s/object."""
+    """Per category: joints, type %, AE mean/worst, OE mean/worst before -> after, wall and CPU
+    seconds of optimisation per object (CPU: user + system time of the process, all threads;
+    comparable between a quiet and a loaded machine, where wall seconds are not)."""
     def f(v: float, p: int = 2) -> str:
         return "-" if math.isnan(v) else f"{v:.{p}f}"
     head = (f"{'category':<13}{'joints':>7}{'type %':>12}{'AE mean':>15}{'AE worst':>15}"
-            f"{'OE mean cm':>15}{'OE worst cm':>15}{'s/obj':>7}")
+            f"{'OE mean cm':>15}{'OE worst cm':>15}{'s/obj':>7}{'CPU s':>7}")
     lines = [head, "-" * len(head)]
     for b, a in zip(before, after):
         types = f"{100 * b['type_acc']:.0f}->{100 * a['type_acc']:.0f}"
@@ -106,7 +109,7 @@ def format_table(before: list[dict], after: list[dict]) -> str:
             f"{a['category']:<13}{a['joints']:>7}{types:>12}"
             f"{f(b['ae_mean']) + '->' + f(a['ae_mean']):>15}{f(b['ae_max']) + '->' + f(a['ae_max']):>15}"
             f"{f(b['oe_mean']) + '->' + f(a['oe_mean']):>15}{f(b['oe_max']) + '->' + f(a['oe_max']):>15}"
-            f"{a['seconds']:>7.1f}")
+            f"{a['seconds']:>7.1f}{a['cpu_seconds']:>7.1f}")
     return "\n".join(lines)
 
 

@@ -72,7 +72,9 @@ def summarize(results: list[dict]) -> list[dict]:
                      "ae_max": max(ae) if ae else math.nan,
                      "oe_mean": float(np.mean(oe)) if oe else math.nan,
                      "oe_max": max(oe) if oe else math.nan,
-                     "seconds": float(np.mean([r["seconds"] for r in group]))})
+                     "seconds": float(np.mean([r["seconds"] for r in group])),
+                     "cpu_seconds": float(np.mean([r.get("cpu_seconds", math.nan)
+                                                   for r in group]))})
     return rows
 
 
