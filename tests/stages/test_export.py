@@ -155,3 +155,20 @@ def test_the_robot_opens_every_part_of_the_exported_model(exported):
     figures = run_stage("check", out, CheckOptions(frames=2), Progress("quiet"))
     assert figures["urdf"].endswith(layout.URDF)
     assert all(r["success"] for r in figures["joints"].values()), figures["joints"]
+
+
+def test_coacd_runs_apart_and_its_failure_is_no_pieces():
+    """CoACD in a child process: a concave L-shaped solid splits into several convex pieces; a
+    decomposition that fails there (here CoACD's own error for a bad setting; a crash of the
+    child the same way) gives no pieces instead of ending the export."""
+    import trimesh
+
+    from artgs.core.stages.export.collision import convex_parts, isolated_coacd
+    ell = trimesh.boolean.union([trimesh.creation.box([1.0, 0.2, 0.2]),
+                                 trimesh.creation.box([0.2, 1.0, 0.2],
+                                                      trimesh.transformations.translation_matrix(
+                                                          [0.4, 0.4, 0.0]))], engine="manifold")
+    pieces = convex_parts(ell, max_hulls=4)
+    assert len(pieces) >= 2 and sum(p.volume for p in pieces) < 1.2 * ell.volume
+    assert isolated_coacd(np.asarray(ell.vertices, float), np.asarray(ell.faces, np.int64),
+                          timeout=60, threshold="not a number") == []

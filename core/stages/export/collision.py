@@ -35,20 +35,55 @@ def convex_parts(mesh: trimesh.Trimesh, threshold: float = 0.05, max_hulls: int 
     hull = mesh.convex_hull
     if hull.volume > 0 and mesh.volume >= CONVEX_ENOUGH * hull.volume:
         return [hull]
-    import coacd
-
-    coacd.set_log_level("error")
-    try:
-        parts = coacd.run_coacd(coacd.Mesh(np.asarray(mesh.vertices, float),
-                                           np.asarray(mesh.faces, np.int64)),
-                                threshold=threshold, max_convex_hull=max_hulls,
-                                preprocess_mode="off", mcts_iterations=20, mcts_nodes=8,
-                                mcts_max_depth=2, resolution=500, seed=0)
-    except Exception:                                   # noqa: BLE001 - CoACD raises bare errors
-        parts = []
+    parts = isolated_coacd(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64),
+                           threshold=threshold, max_convex_hull=max_hulls,
+                           preprocess_mode="off", mcts_iterations=20, mcts_nodes=8,
+                           mcts_max_depth=2, resolution=500, seed=0)
     hulls = [trimesh.Trimesh(v, f).convex_hull for v, f in parts if len(f) >= 4]
     hulls = [h for h in hulls if h.volume > 1e-12]
     return hulls or [hull]
+
+
+def _coacd_pieces(queue, vertices: np.ndarray, faces: np.ndarray, settings: dict) -> None:
+    import coacd
+
+    coacd.set_log_level("error")
+    queue.put([(np.asarray(v), np.asarray(f))
+               for v, f in coacd.run_coacd(coacd.Mesh(vertices, faces), **settings)])
+
+
+def isolated_coacd(vertices: np.ndarray, faces: np.ndarray, timeout: float = 600.0,
+                   **settings) -> list[tuple[np.ndarray, np.ndarray]]:
+    """CoACD's pieces (vertices, faces) computed in a child process: CoACD crashes the process
+    on some meshes (a segmentation fault measured on a 48x36 test capture's body) and never
+    returns on some settings, either of which would end or hang the export; here a crash, an
+    error or ``timeout`` seconds without an answer is just no pieces (the caller falls back to
+    the convex hull). About 1 s of process start per concave part."""
+    import multiprocessing
+    import queue as queues
+    import time
+
+    ctx = multiprocessing.get_context("spawn")
+    answer = ctx.Queue()
+    child = ctx.Process(target=_coacd_pieces, args=(answer, vertices, faces, settings),
+                        daemon=True)
+    child.start()
+    deadline = time.monotonic() + timeout
+    try:
+        while True:
+            try:
+                return answer.get(timeout=0.2)
+            except queues.Empty:                       # crashed, failed or still running
+                if not child.is_alive() or time.monotonic() > deadline:
+                    try:
+                        return answer.get(timeout=0.5)
+                    except queues.Empty:
+                        return []
+    finally:
+        child.join(1.0)
+        if child.is_alive():
+            child.kill()
+            child.join()
 
 
 def write_obj(path: str | Path, pieces: list[trimesh.Trimesh], mtl: str | None = None,
