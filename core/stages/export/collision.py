@@ -44,46 +44,34 @@ def convex_parts(mesh: trimesh.Trimesh, threshold: float = 0.05, max_hulls: int 
     return hulls or [hull]
 
 
-def _coacd_pieces(queue, vertices: np.ndarray, faces: np.ndarray, settings: dict) -> None:
-    import coacd
-
-    coacd.set_log_level("error")
-    queue.put([(np.asarray(v), np.asarray(f))
-               for v, f in coacd.run_coacd(coacd.Mesh(vertices, faces), **settings)])
-
-
 def isolated_coacd(vertices: np.ndarray, faces: np.ndarray, timeout: float = 600.0,
                    **settings) -> list[tuple[np.ndarray, np.ndarray]]:
-    """CoACD's pieces (vertices, faces) computed in a child process: CoACD crashes the process
-    on some meshes (a segmentation fault measured on a 48x36 test capture's body) and never
-    returns on some settings, either of which would end or hang the export; here a crash, an
-    error or ``timeout`` seconds without an answer is just no pieces (the caller falls back to
-    the convex hull). About 1 s of process start per concave part."""
-    import multiprocessing
-    import queue as queues
-    import time
+    """CoACD's pieces (vertices, faces) computed in a child process (``coacd_child.py``, run as
+    a plain script by ``subprocess``: a batch worker is a daemonic process, which may not start
+    ``multiprocessing`` children): CoACD crashes the process on some meshes (a segmentation
+    fault measured on a 48x36 test capture's body) and never returns on some settings, either of
+    which would end or hang the export; here a crash, an error or ``timeout`` seconds without an
+    answer is just no pieces (the caller falls back to the convex hull)."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
 
-    ctx = multiprocessing.get_context("spawn")
-    answer = ctx.Queue()
-    child = ctx.Process(target=_coacd_pieces, args=(answer, vertices, faces, settings),
-                        daemon=True)
-    child.start()
-    deadline = time.monotonic() + timeout
-    try:
-        while True:
-            try:
-                return answer.get(timeout=0.2)
-            except queues.Empty:                       # crashed, failed or still running
-                if not child.is_alive() or time.monotonic() > deadline:
-                    try:
-                        return answer.get(timeout=0.5)
-                    except queues.Empty:
-                        return []
-    finally:
-        child.join(1.0)
-        if child.is_alive():
-            child.kill()
-            child.join()
+    with tempfile.TemporaryDirectory(prefix="artgs-coacd-") as tmp:
+        src, dst = Path(tmp) / "mesh.npz", Path(tmp) / "pieces.npz"
+        np.savez(src, vertices=np.asarray(vertices, float), faces=np.asarray(faces, np.int64),
+                 settings=json.dumps(settings))
+        try:
+            done = subprocess.run([sys.executable, str(Path(__file__).with_name("coacd_child.py")),
+                                   str(src), str(dst)], stdin=subprocess.DEVNULL,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                  timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return []
+        if done.returncode != 0 or not dst.exists():
+            return []
+        with np.load(dst) as pieces:
+            return [(pieces[f"v{k}"], pieces[f"f{k}"]) for k in range(len(pieces.files) // 2)]
 
 
 def write_obj(path: str | Path, pieces: list[trimesh.Trimesh], mtl: str | None = None,
