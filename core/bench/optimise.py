@@ -22,17 +22,17 @@ from pathlib import Path
 
 import numpy as np
 
+from dataclasses import replace
+
 from ..geometry.metrics import match_joints
 from ..model import layout
-from ..model.capture import load_capture
-from ..model.errors import NothingFound
 from ..model.joints import Articulation, read_articulation, rotation_about_axis, write_articulation
-from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
-from ..model.registry import OptimiseOptions, ProposeOptions
+from ..model.registry import OptimiseOptions
 from .options import BenchOptimiseOptions
 from .propose import summarize
-from .sets import materialise, parse_set
+from .runs import materialise_variants, motion_proposals, plan_variants, prepare, run_variants
+from .sets import parse_set
 
 
 def _scores(pred, gt) -> list[dict]:
@@ -55,27 +55,14 @@ def perturbed(joints, rng: np.random.Generator) -> list:
     return out
 
 
-def bench_capture(capture_dir: Path, work: Path, options, iterations: int = 0, basin: int = 0,
-                  seed: int = 0) -> dict:
-    """Propose, optimise and score one capture; plus ``basin`` perturbed-start runs."""
+def bench_capture(capture_dir: Path, work: Path, options: OptimiseOptions, iterations: int = 0,
+                  basin: int = 0, seed: int = 0) -> dict:
+    """Propose, optimise and score one capture; plus ``basin`` perturbed-start runs. The
+    proposals use the twin as the optimisation does (``options.robot_twin``)."""
     from ..stages.optimise import optimise
-    from ..stages.propose.stage import propose
-    from ..stages.reconstruct import initial_splats, reconstruct
 
-    capture = load_capture(capture_dir)
-    gt = read_articulation(capture_dir / "gt.json")
-    out = work / capture_dir.name
-    out.mkdir(parents=True, exist_ok=True)
-    if iterations > 0:
-        reconstruct(capture, out, QUIET, iterations=iterations, device=options.device)
-    else:
-        write_ply(out / layout.SPLAT, initial_splats(capture.static)[0])
-    try:
-        proposals = propose(capture, out, QUIET,
-                            ProposeOptions(method="motion", device=options.device))
-    except NothingFound:   # the motion route found nothing: the optimisation starts from no joints
-        proposals = Articulation([], {"source": "motion"})
-        write_articulation(out / layout.PROPOSALS, proposals)
+    capture, gt, out = prepare(capture_dir, work, iterations, options.device)
+    proposals = motion_proposals(capture, out, options.device, options.robot_twin)
     t0, c0 = time.perf_counter(), time.process_time()
     optimise(out, capture, QUIET, options)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -120,38 +107,61 @@ def basin_rate(results: list[dict], ae: float = 1.0, oe: float = 1.0) -> tuple[f
     return (sum(ok) / len(ok) if ok else math.nan), len(ok)
 
 
+def comparison(title: str, base: dict, row: dict) -> str:
+    """One line: ``row``'s overall type %, AE mean and OE mean against the robot-free ``base``
+    (relative change in %; ``-`` where the robot-free figure is zero or not applicable)."""
+    def rel(key: str, unit: str, scale: float = 1.0, p: int = 2) -> str:
+        v, b = scale * row[key], scale * base[key]
+        if math.isnan(v) or math.isnan(b):
+            return "- (robot-free -)"
+        change = "-" if b == 0 else f"{100 * (v - b) / b:+.0f} %"
+        return f"{v:.{p}f}{unit} (robot-free {b:.{p}f}{unit}, {change})"
+    return (f"{title}: type {rel('type_acc', ' %', 100, 0)}, AE mean {rel('ae_mean', ' deg')}, "
+            f"OE mean {rel('oe_mean', ' cm')}")
+
+
 def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
     """``artgs bench-optimise [--set tight|realistic|partnet:DIR|data:DIR] [--per-category N]
     [--seed S] [--category C ...] [--width W --height H] [--iterations N] [--opt-iterations N]
-    [--basin N]``."""
-    options = OptimiseOptions(iterations=args.opt_iterations, device=args.device)
+    [--basin N] [--robot R]``."""
+    base = OptimiseOptions(iterations=args.opt_iterations, device=args.device)
     bset = parse_set(args.set, args.data)
+    variants = plan_variants(bset, args.robot)
     with tempfile.TemporaryDirectory(prefix="artgs-bench-optimise-") as tmp:
         tmp = Path(tmp)
-        captures = materialise(bset, tmp / "data", per_category=args.per_category,
-                               seed=args.seed, categories=args.category, progress=progress,
-                               marker="gt.json", width=args.width, height=args.height)
-        progress.start("bench-optimise", f"{len(captures)} captures")
-        results = []
-        for k, cap in enumerate(captures):
-            r = bench_capture(Path(cap), tmp / "out", options, args.iterations, args.basin,
-                              args.seed)
-            results.append(r)
-            progress.update("bench-optimise", (k + 1) / len(captures), r["capture"],
-                            seconds=round(r["seconds"], 1),
-                            worst_ae=round(max((s["ae"] for s in r["after"]), default=0.0), 2))
-        before = summarize([{**r, "scores": r["before"]} for r in results])
-        after = summarize([{**r, "scores": r["after"]} for r in results])
-        rate, n = basin_rate(results)
-        progress.finish("bench-optimise", captures=len(captures))
+        sets = materialise_variants(bset, tmp, variants, per_category=args.per_category,
+                                    seed=args.seed, categories=args.category, progress=progress,
+                                    marker="gt.json", width=args.width, height=args.height)
+        runs = run_variants(
+            sets, lambda cap, work, v: bench_capture(
+                cap, work, replace(base, robot_twin=v.robot_twin), args.iterations, args.basin,
+                args.seed),
+            tmp, progress, "bench-optimise",
+            lambda r: {"seconds": round(r["seconds"], 1),
+                       "worst_ae": round(max((s["ae"] for s in r["after"]), default=0.0), 2)})
+    tables = [(v, summarize([{**r, "scores": r["before"]} for r in results]),
+               summarize([{**r, "scores": r["after"]} for r in results]), results)
+              for v, results in runs]
     if progress.mode == "json":
+        _, before, after, results = tables[0]
+        rate, n = basin_rate(results)
         progress.finished(before=json.dumps(before), after=json.dumps(after), basin_rate=rate,
-                          basin_joints=n, results=json.dumps(results))
-    else:
-        print(f"set {bset.label}, {len(captures)} captures, splat iterations {args.iterations}, "
-              f"optimisation iterations {args.opt_iterations}")
+                          basin_joints=n, results=json.dumps(results),
+                          variants=json.dumps([{"title": v.title, "before": b, "after": a}
+                                               for v, b, a, _ in tables]))
+        return 0
+    print(f"set {bset.label}, {len(sets[0][1])} captures, splat iterations {args.iterations}, "
+          f"optimisation iterations {args.opt_iterations}")
+    for v, before, after, results in tables:
+        if len(tables) > 1:
+            print(f"\n{v.title}:")
         print(format_table(before, after))
+        rate, n = basin_rate(results)
         if n:
             print(f"basin: {100 * rate:.0f} % of {n} joints from perturbed starts (10-30 deg, "
                   f"5-15 cm) end within 1 deg and 1 cm")
+    if len(tables) > 1:
+        print("\nafter optimisation, overall, against robot-free:")
+        for v, _, after, _ in tables[1:]:
+            print(comparison(v.title, tables[0][2][-1], after[-1]))
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from ..model.categories import CATEGORIES, EXTRA_KINDS
 from ..model.registry import DEVICES, option
@@ -13,6 +14,12 @@ from ..render.constants import LOW_PASS
 #: Help of every benchmark's ``--set`` (core/bench/sets.py defines the sets).
 SET_HELP = ("benchmark set: tight | realistic | partnet:DIR (DIR/<kind>/<id>/mobility.urdf) | "
             "data:DIR (default tight); see core/bench/sets.py")
+
+
+def _in_view_robot() -> Any:
+    """The robot opening the parts in view during the capture (issue 16's variants)."""
+    return option(None, "generated sets: also the same objects opened by this robot in view, "
+                  "scored with its twin and without (ablation)", choices=tuple(ROBOTS))
 
 
 @dataclass
@@ -64,9 +71,7 @@ class BenchProposeOptions(SetOptions):
     per_category: int = option(2, "objects per category (generated sets)")
     depth_noise: float = option(0.0, "generated sets: depth noise std-dev, metres")
     simultaneous: bool = option(False, "generated sets: the first two joints also move together")
-    robot: str | None = option(None, "generated sets: also the same objects opened by this robot "
-                               "in view, scored with its twin and without (ablation)",
-                               choices=tuple(ROBOTS))
+    robot: str | None = _in_view_robot()
 
 
 @dataclass
@@ -76,6 +81,7 @@ class BenchOptimiseOptions(SetOptions):
     opt_iterations: int = option(300, "steps of the main articulation fit")
     basin: int = option(0, "perturbed-start runs per capture (10-30 deg, 5-15 cm) for the basin "
                         "rate")
+    robot: str | None = _in_view_robot()
 
 
 @dataclass
@@ -102,4 +108,6 @@ class BenchCheckOptions(SetOptions):
     per_category: int = option(2, "objects per category (generated sets)")
     category: list[str] | None = option(None, "generated sets: only these categories",
                                         choices=CATEGORIES)
-    robot: str = option("franka_panda", "robot from pybullet_data", choices=ROBOTS)
+    robot: str = option("franka_panda", "robot from pybullet_data that performs the check",
+                        choices=ROBOTS)
+    in_view_robot: str | None = _in_view_robot()

@@ -19,14 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.capture import load_capture
-from ..model.joints import read_articulation
 from ..geometry.metrics import match_joints
-from ..model.ply import write_ply
-from ..model.progress import QUIET, Progress
-from ..model.registry import ProposeOptions
+from ..model.progress import Progress
 from .options import BenchProposeOptions
-from .sets import materialise, parse_set
+from .runs import materialise_variants, motion_proposals, plan_variants, prepare, run_variants
+from .sets import parse_set
 
 
 def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0,
@@ -35,20 +32,9 @@ def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iteration
 
     The static splat is the depth-initialised one, or optimised for ``iterations`` iterations.
     """
-    from ..stages.propose.stage import propose
-    from ..stages.reconstruct import initial_splats, reconstruct
-
-    capture = load_capture(capture_dir)
-    gt = read_articulation(capture_dir / "gt.json")
-    out = work / capture_dir.name
-    out.mkdir(parents=True, exist_ok=True)
-    if iterations > 0:
-        reconstruct(capture, out, QUIET, iterations=iterations, device=device)
-    else:
-        write_ply(out / "splat.ply", initial_splats(capture.static)[0])
+    capture, gt, out = prepare(capture_dir, work, iterations, device)
     t0 = time.perf_counter()
-    art = propose(capture, out, QUIET, ProposeOptions(method="motion", device=device,
-                                                      robot_twin=robot_twin))
+    art = motion_proposals(capture, out, device, robot_twin)
     seconds = time.perf_counter() - t0
     scores = match_joints(art.joints, gt.joints)
     return {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name),
@@ -95,38 +81,23 @@ def format_table(rows: list[dict]) -> str:
 def bench_propose(args: BenchProposeOptions, progress: Progress) -> int:
     """``artgs bench-propose [--set tight|realistic|partnet:DIR|data:DIR] [--per-category N]
     [--seed S] [--depth-noise s] [--simultaneous] [--category C ...] [--width W --height H]
-    [--iterations N]``."""
+    [--iterations N] [--robot R]``."""
     bset = parse_set(args.set, args.data)
+    variants = plan_variants(bset, args.robot)
     with tempfile.TemporaryDirectory(prefix="artgs-bench-propose-") as tmp:
         tmp = Path(tmp)
-        synth = dict(width=args.width, height=args.height, depth_noise=args.depth_noise,
-                     simultaneous=args.simultaneous)
-        captures = materialise(bset, tmp / "data", per_category=args.per_category,
-                               seed=args.seed, categories=args.category, progress=progress,
-                               marker="gt.json", **synth)
-        variants = [("", captures, True)]
-        if args.robot and bset.kind != "data":
-            robot_set = materialise(bset, tmp / "robot", per_category=args.per_category,
+        sets = materialise_variants(bset, tmp, variants, per_category=args.per_category,
                                     seed=args.seed, categories=args.category, progress=progress,
-                                    marker="gt.json", robot=args.robot, **synth)
-            variants += [(f"{args.robot} in view, with its twin", robot_set, True),
-                         (f"{args.robot} in view, without the twin (ablation)", robot_set, False)]
-        progress.start("bench-propose", f"{len(captures)} captures")
-        tables = []
-        n = sum(len(c) for _, c, _ in variants)
-        done = 0
-        for title, caps, twin in variants:
-            results = []
-            for cap in caps:
-                r = bench_capture(Path(cap), tmp / f"out{done}", args.device, args.iterations,
-                                  robot_twin=twin)
-                results.append(r)
-                done += 1
-                worst = max((s["ae"] for s in r["scores"]), default=0.0)
-                progress.update("bench-propose", done / n, r["capture"],
-                                seconds=round(r["seconds"], 1), worst_ae=round(worst, 2))
-            tables.append((title, summarize(results), results))
-        progress.finish("bench-propose", captures=len(captures))
+                                    marker="gt.json", width=args.width, height=args.height,
+                                    depth_noise=args.depth_noise, simultaneous=args.simultaneous)
+        runs = run_variants(
+            sets, lambda cap, work, v: bench_capture(cap, work, args.device, args.iterations,
+                                                      robot_twin=v.robot_twin),
+            tmp, progress, "bench-propose",
+            lambda r: {"seconds": round(r["seconds"], 1),
+                       "worst_ae": round(max((s["ae"] for s in r["scores"]), default=0.0), 2)})
+    tables = [(v, summarize(results), results) for v, results in runs]
+    captures = sets[0][1]
     if progress.mode == "json":
         progress.finished(**{f"rows{k or ''}": json.dumps(rows)
                              for k, (_, rows, _) in enumerate(tables)},
@@ -135,8 +106,8 @@ def bench_propose(args: BenchProposeOptions, progress: Progress) -> int:
         print(f"set {bset.label}, seed {args.seed}, depth noise {args.depth_noise} m, "
               f"simultaneous {args.simultaneous}, splat iterations {args.iterations}, "
               f"{len(captures)} captures")
-        for title, rows, _ in tables:
-            if title:
-                print(f"\n{title}:")
+        for variant, rows, _ in tables:
+            if len(tables) > 1:
+                print(f"\n{variant.title}:")
             print(format_table(rows))
     return 0
