@@ -5,7 +5,11 @@ data:DIR``): propose joints (motion route, on the
 depth-initialised splat unless ``--iterations``), then a robot opens every part of the capture's
 ground-truth ``gt.urdf`` along the proposed joints (core/sim/manipulate.py): "proposals only".
 When the project has an ``optimise`` stage it is run next and the check repeated: "with
-optimisation". Prints success rate per category and overall, and seconds per check.
+optimisation" (when the motion route finds nothing, no part opens on proposals alone and the
+optimisation starts from no joints, as it may still add parts). Prints success rate per category
+and overall, and seconds per check. With ``--in-view-robot R`` (generated sets) the same objects
+are generated again with robot R opening the parts in view and benchmarked with the robot's twin
+and without it (ablation; core/bench/runs.py): one table per variant.
 """
 
 from __future__ import annotations
@@ -14,17 +18,17 @@ import json
 import math
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
-from ..model import layout, registry
-from ..model.capture import load_capture
-from ..model.errors import InputError, NothingFound
-from ..model.joints import read_articulation
-from ..model.ply import write_ply
+from ..model import registry
+from ..model.errors import InputError
 from ..model.progress import QUIET, Progress
-from ..model.registry import CheckOptions, ProposeOptions
+from ..model.registry import CheckOptions
 from .options import BenchCheckOptions
-from .sets import materialise, parse_set
+from .runs import (ROBOT_FREE, Variant, materialise_variants, motion_proposals, plan_variants,
+                   prepare, run_variants)
+from .sets import parse_set
 
 
 def check_out(out: Path, urdf: Path, robot: str) -> dict[str, dict]:
@@ -35,34 +39,30 @@ def check_out(out: Path, urdf: Path, robot: str) -> dict[str, dict]:
     return figures["joints"]
 
 
-def bench_capture(capture_dir: Path, work: Path, options: BenchCheckOptions) -> dict:
-    """Proposals (and optimisation, if the stage exists) for one capture, each checked."""
+def bench_capture(capture_dir: Path, work: Path, options: BenchCheckOptions,
+                  variant: Variant = ROBOT_FREE) -> dict:
+    """Proposals (and optimisation, if the stage exists) for one capture, each checked; both
+    with the robot's twin or without it (``variant.robot_twin``). When the motion route finds
+    nothing, no part opens on proposals alone, and the optimisation starts from no joints."""
     from ..pipeline import run_stage
-    from ..stages.propose.stage import propose
-    from ..stages.reconstruct import initial_splats, reconstruct
 
-    capture = load_capture(capture_dir)
-    gt = read_articulation(capture_dir / "gt.json")
-    out = work / capture_dir.name
-    out.mkdir(parents=True, exist_ok=True)
-    if options.iterations > 0:
-        reconstruct(capture, out, QUIET, iterations=options.iterations, device=options.device)
-    else:
-        write_ply(out / layout.SPLAT, initial_splats(capture.static)[0])
-    result = {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name),
-              "seconds_per_check": 0.0}
-    try:
-        propose(capture, out, QUIET, ProposeOptions(method="motion", device=options.device))
-    except NothingFound:                       # every part counts as not opened
-        missed = {j.name: {"success": False, "reason": "no joints proposed"} for j in gt.joints}
-        return {**result, "proposals": missed, "optimised": missed}
+    capture, gt, out = prepare(capture_dir, work, options.iterations, options.device)
+    motion_proposals(capture, out, options.device, variant.robot_twin)
+    urdf = capture_dir / "gt.urdf"
     t0 = time.perf_counter()
-    result["proposals"] = check_out(out, capture_dir / "gt.urdf", options.robot)
+    result = {"capture": capture_dir.name, "category": gt.meta.get("category", capture_dir.name),
+              "proposals": check_out(out, urdf, options.robot)}
     result["seconds_per_check"] = (time.perf_counter() - t0) / max(len(result["proposals"]), 1)
     if "optimise" in registry.names():
-        run_stage("optimise", out, registry.stage("optimise").options(), QUIET, capture=capture)
-        result["optimised"] = check_out(out, capture_dir / "gt.urdf", options.robot)
+        optimise = replace(registry.stage("optimise").options(), robot_twin=variant.robot_twin)
+        run_stage("optimise", out, optimise, QUIET, capture=capture)
+        result["optimised"] = check_out(out, urdf, options.robot)
     return result
+
+
+def opened(joints: dict[str, dict]) -> str:
+    """``k/n``: parts opened of a capture's checked parts."""
+    return f"{sum(bool(j['success']) for j in joints.values())}/{len(joints)}"
 
 
 def table(results: list[dict]) -> str:
@@ -86,31 +86,31 @@ def table(results: list[dict]) -> str:
 
 def bench_check(args: BenchCheckOptions, progress: Progress) -> int:
     """``artgs bench-check [--set tight|realistic|partnet:DIR|data:DIR] [--per-category N]
-    [--seed S] [--category C ...]``."""
+    [--seed S] [--category C ...] [--robot R] [--in-view-robot R]``."""
+    bset = parse_set(args.set, args.data)
+    variants = plan_variants(bset, args.in_view_robot, "in_view_robot")
     with tempfile.TemporaryDirectory(prefix="artgs-bench-check-") as tmp:
         tmp = Path(tmp)
-        bset = parse_set(args.set, args.data)
-        captures = [c for c in materialise(bset, tmp / "data", per_category=args.per_category,
-                                           seed=args.seed, categories=args.category,
-                                           progress=progress, marker="gt.json",
-                                           **({} if bset.kind == "data" else
-                                              {"width": args.width, "height": args.height}))
-                    if (c / "gt.urdf").is_file()]
-        if not captures:
+        sets = [(v, [c for c in caps if (c / "gt.urdf").is_file()]) for v, caps in
+                materialise_variants(bset, tmp, variants, per_category=args.per_category,
+                                     seed=args.seed, categories=args.category,
+                                     progress=progress, marker="gt.json",
+                                     **({} if bset.kind == "data" else
+                                        {"width": args.width, "height": args.height}))]
+        if not sets[0][1]:
             raise InputError(bset.label, "no captures with gt.json and gt.urdf", field="set")
-        progress.start("bench-check", f"{len(captures)} captures")
-        results = []
-        for k, cap in enumerate(captures):
-            r = bench_capture(Path(cap), tmp / "out", args)
-            results.append(r)
-            wins = sum(bool(j["success"]) for j in r["proposals"].values())
-            progress.update("bench-check", (k + 1) / len(captures), r["capture"],
-                            opened=f"{wins}/{len(r['proposals'])}")
-        progress.finish("bench-check", captures=len(captures))
+        runs = run_variants(
+            sets, lambda cap, work, v: bench_capture(cap, work, args, v), tmp, progress,
+            "bench-check", lambda r: {"opened": opened(r["proposals"])})
     if progress.mode == "json":
-        progress.finished(results=json.dumps(results))
-    else:
-        print(f"set {bset.label}, robot {args.robot}, splat iterations {args.iterations}, "
-              f"{len(captures)} captures")
+        progress.finished(results=json.dumps(runs[0][1]),
+                          variants=json.dumps([{"title": v.title, "results": results}
+                                               for v, results in runs]))
+        return 0
+    print(f"set {bset.label}, robot {args.robot}, splat iterations {args.iterations}, "
+          f"{len(sets[0][1])} captures")
+    for v, results in runs:
+        if len(runs) > 1:
+            print(f"\n{v.title}:")
         print(table(results))
     return 0

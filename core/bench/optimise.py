@@ -18,11 +18,10 @@ import json
 import math
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-
-from dataclasses import replace
 
 from ..geometry.metrics import match_joints
 from ..model import layout

@@ -1,0 +1,109 @@
+"""The benchmarks' variants (core/bench/runs.py): robot-free, robot in view with its twin and
+without (issue 16); their flags; bench-check when the motion route finds nothing. No benchmark
+runs here: generation, proposals, optimisation and the check are stand-ins."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from artgs.core.bench import check as bench_check
+from artgs.core.bench import runs
+from artgs.core.bench.options import BenchCheckOptions, BenchOptimiseOptions
+from artgs.core.bench.sets import BenchSet
+from artgs.core.cli import main
+from artgs.core.cli.app import build_parser
+from artgs.core.cli.options import build
+from artgs.core.model.errors import InputError, NothingFound
+from artgs.core.model.joints import Articulation
+from artgs.core.model.progress import QUIET
+
+
+def test_robot_flags_parse():
+    """bench-optimise --robot, bench-check --in-view-robot beside --robot (the checking robot)."""
+    ns = build_parser().parse_args(["bench-optimise", "--robot", "xarm6", "--category", "cabinet"])
+    assert build(BenchOptimiseOptions, ns).robot == "xarm6"
+    ns = build_parser().parse_args(["bench-check", "--robot", "xarm6",
+                                    "--in-view-robot", "franka_panda"])
+    opts = build(BenchCheckOptions, ns)
+    assert (opts.robot, opts.in_view_robot) == ("xarm6", "franka_panda")
+    assert build(BenchCheckOptions, build_parser().parse_args(["bench-check"])).in_view_robot \
+        is None
+
+
+def test_bad_robot_flags_exit_2(tmp_path, capsys):
+    """An unknown robot, or a robot in view on a data: set, exits 2 naming the option."""
+    with pytest.raises(SystemExit) as exc:
+        main(["bench-optimise", "--robot", "ur5", "--quiet"])
+    assert exc.value.code == 2 and "--robot" in capsys.readouterr().err
+    assert main(["bench-check", "--data", str(tmp_path), "--in-view-robot", "xarm6",
+                 "--quiet"]) == 2
+    assert "in-view-robot" in capsys.readouterr().err
+
+
+def test_plan_variants():
+    assert runs.plan_variants(BenchSet("tight"), None) == [runs.ROBOT_FREE]
+    variants = runs.plan_variants(BenchSet("realistic"), "xarm6")
+    assert [(v.robot, v.robot_twin) for v in variants] == \
+        [(None, True), ("xarm6", True), ("xarm6", False)]
+    assert [v.title for v in variants] == ["robot-free", "xarm6 in view, with its twin",
+                                           "xarm6 in view, without the twin (ablation)"]
+    with pytest.raises(InputError, match="in_view_robot"):
+        runs.plan_variants(BenchSet("data", Path(".")), "xarm6", "in_view_robot")
+
+
+def test_materialise_once_per_robot_and_run(tmp_path, monkeypatch):
+    """The robot's set is generated once for both of its variants; every capture of every
+    variant is benchmarked into its own folder."""
+    calls = []
+
+    def fake_materialise(bset, work, **kwargs):
+        calls.append((work.name, kwargs.get("robot")))
+        return [work / "cabinet_00", work / "drawer_00"]
+
+    monkeypatch.setattr(runs, "materialise", fake_materialise)
+    variants = runs.plan_variants(BenchSet("tight"), "franka_panda")
+    sets = runs.materialise_variants(BenchSet("tight"), tmp_path, variants, seed=0)
+    assert calls == [("data", None), ("franka_panda", "franka_panda")]
+    assert sets[1][1] is sets[2][1] and sets[0][1][0].parent.name == "data"
+    done = runs.run_variants(sets, lambda cap, work, v: {"capture": cap.name, "work": work.name,
+                                                         "twin": v.robot_twin},
+                             tmp_path, QUIET, "bench-test")
+    assert [[(r["work"], r["twin"]) for r in results] for _, results in done] == \
+        [[("out0", True)] * 2, [("out1", True)] * 2, [("out2", False)] * 2]
+
+
+def test_bench_check_optimises_when_nothing_proposed(tmp_path, monkeypatch):
+    """The motion route finds nothing: proposals.json holds no joints, the optimise stage still
+    runs (with the variant's twin setting) and its joints are checked."""
+    import artgs.core.pipeline as pipeline
+    import artgs.core.stages.propose.stage as propose_stage
+
+    out = tmp_path / "out" / "cabinet_00"
+    out.mkdir(parents=True)
+    gt = Articulation([], {"category": "cabinet"})
+    monkeypatch.setattr(bench_check, "prepare", lambda *a: (object(), gt, out))
+
+    def nothing(*args, **kwargs):
+        raise NothingFound("no moving parts")
+
+    monkeypatch.setattr(propose_stage, "propose", nothing)
+    stages = []
+    monkeypatch.setattr(pipeline, "run_stage",
+                        lambda name, o, options, progress, capture: stages.append(
+                            (name, options.robot_twin)))
+    checked = []
+
+    def fake_check(o, urdf, robot):
+        checked.append(json.loads((o / "proposals.json").read_text())["joints"])
+        return {"door": {"success": len(checked) == 2}}
+
+    monkeypatch.setattr(bench_check, "check_out", fake_check)
+    variant = runs.Variant("franka_panda in view, without the twin (ablation)", "franka_panda",
+                           False)
+    r = bench_check.bench_capture(tmp_path / "cabinet_00", tmp_path / "out",
+                                  BenchCheckOptions(), variant)
+    assert checked == [[], []] and stages == [("optimise", False)]
+    assert r["proposals"]["door"]["success"] is False and r["optimised"]["door"]["success"]
