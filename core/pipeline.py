@@ -17,6 +17,7 @@ from typing import Any, Callable
 
 from .model import layout, registry
 from .model.capture import Capture, load_capture, resolution_note
+from .model.errors import NothingFound
 from .model.outdir import claim_out
 from .model.joints import Articulation, read_articulation
 from .model.progress import Progress
@@ -92,7 +93,9 @@ def run(capture_dir: str | Path, out: str | Path, progress: Progress,
 
     ``options``: per stage name, its options dataclass (defaults for the others). Every stage's
     check runs before the first stage starts. While no stage writes ``articulation.json``, the
-    proposals are written as it, marked ``"optimised": false``. ``resume``: a stage already
+    proposals are written as it, marked ``"optimised": false``. A stage that finds nothing and
+    declares a ``nothing_found`` stand-in (the proposals: none, so that the optimisation searches
+    the frames for moving parts) lets the run go on. ``resume``: a stage already
     finished in OUT for this capture (:func:`core.resume.stage_finished`) is not run again.
     """
     options = {s.name: (options or {}).get(s.name) or s.options() for s in registry.STAGES}
@@ -117,7 +120,13 @@ def _run(capture_dir: Path, out: Path, progress: Progress, options: dict[str, An
         if since is not None and stage_finished(spec, out, since):
             progress.log(f"{spec.name}: already done, skipped")
             continue
-        run_stage(spec, out, options[spec.name], progress, capture=capture)
+        try:
+            run_stage(spec, out, options[spec.name], progress, capture=capture)
+        except NothingFound:
+            if spec.nothing_found is None:
+                raise
+            figures = resolve(spec.nothing_found)(out, options, progress)
+            layout.update_report(out, spec.name, **figures)
 
     articulation = read_articulation(out / layout.ARTICULATION)
     layout.update_report(out, "run", seconds=round(time.perf_counter() - start, 2),

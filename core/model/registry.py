@@ -141,6 +141,9 @@ class StageSpec:
     run: str
     check: str | None = None
     needs_capture: bool = True
+    #: In ``artgs run``, what stands in for the stage's outputs when it finds nothing
+    #: (``NothingFound``) and a later stage can still find it; None: the run stops there.
+    nothing_found: str | None = None
 
 
 STAGES: tuple[StageSpec, ...] = (
@@ -149,7 +152,8 @@ STAGES: tuple[StageSpec, ...] = (
               run="stages.reconstruct:run", check="stages.reconstruct:check"),
     StageSpec("propose", "Bones", "initial joints -> OUT/proposals.json",
               reads=(layout.SPLAT,), writes=(layout.PROPOSALS,), options=ProposeOptions,
-              run="stages.propose.stage:run", check="stages.propose.stage:check"),
+              run="stages.propose.stage:run", check="stages.propose.stage:check",
+              nothing_found="stages.propose.stage:none_proposed"),
     StageSpec("optimise", "Optimise", "fit joints, states and parts to the interaction frames "
               "-> OUT/articulation.json, OUT/part_labels.npy",
               reads=(layout.SPLAT, layout.PROPOSALS),

@@ -86,3 +86,34 @@ def test_run_refuses_bad_input_before_any_work(cabinet, tmp_path):
     res = _artgs("run", str(cabinet), "--out", str(out), "--method", "vlm", env=env)
     assert res.returncode == 2 and "ARTGS_VLM_ENDPOINT" in res.stderr
     assert not (out / "splat.ply").exists()
+
+
+def test_run_goes_on_when_no_joint_is_proposed_and_the_optimisation_finds_the_parts(
+        cabinet, tmp_path):
+    """A VLM answering nonsense proposes nothing: ``artgs run`` writes proposals.json with no
+    joints, says so, and the optimisation finds the moving parts in the frames (missed-part
+    search), which export and check then use."""
+    from vlm_server import Server, answer
+
+    server = Server(answer("I like turtles."))
+    out = tmp_path / "out"
+    try:
+        res = _artgs("run", str(cabinet), "--out", str(out), "--reconstruct-iterations", "60",
+                     "--optimise-iterations", "40", "--export-views", "12", "--check-frames",
+                     "2", "--propose-method", "vlm", "--vlm-endpoint", server.endpoint,
+                     "--vlm-model", "m")
+    finally:
+        server.close()
+    assert res.returncode == 0, res.stderr + res.stdout
+    assert "vlm route found no joints" in res.stderr + res.stdout
+    proposals = json.loads((out / "proposals.json").read_text())
+    assert proposals["joints"] == [] and proposals["found"] == "none"
+    report = json.loads((out / "report.json").read_text())
+    assert report["stages"]["propose"]["found"] == "none" and "check" in report["stages"]
+    art = read_articulation(out / "articulation.json")
+    assert art.joints and all(j.source == "optimise" for j in art.joints)
+    scores = {s.true_name: s for s in match_joints(art.joints,
+                                                   read_articulation(cabinet / "gt.json").joints)}
+    assert all(s.type_correct for s in scores.values()), scores
+    assert scores["drawer"].axis_error_deg < 5.0, scores
+    assert (out / "model.urdf").is_file()

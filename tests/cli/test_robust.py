@@ -13,9 +13,8 @@ import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import BaseHTTPRequestHandler
 from pathlib import Path
 
 import cv2
@@ -33,6 +32,7 @@ from artgs.core.stages.reconstruct import reconstruct
 from artgs.core.synth.generate import generate_object
 
 from ply_poke import poke_ply  # noqa: E402 - tests/ is on sys.path under pytest
+from vlm_server import Server, answer  # noqa: E402
 
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p),
        "OMP_WAIT_POLICY": "PASSIVE"}
@@ -112,54 +112,8 @@ def test_splat_with_zero_gaussians_is_refused(out):
 
 # --- a stage that finds nothing ------------------------------------------------------------------
 
-class Server:
-    """A local OpenAI-compatible server; ``handler(request_handler)`` writes the answer."""
-
-    def __init__(self, handler) -> None:
-        self.requests: list[float] = []
-        self.closed: list[float] = []
-        server = self
-
-        class Handler(BaseHTTPRequestHandler):
-            def do_POST(self) -> None:  # noqa: N802
-                self.rfile.read(int(self.headers["Content-Length"]))
-                server.requests.append(time.monotonic())
-                try:
-                    handler(self)
-                except OSError:
-                    pass
-                server.closed.append(time.monotonic())
-
-            def log_message(self, *args) -> None:
-                pass
-
-        self.http = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.http.daemon_threads = True
-        self.http.block_on_close = False
-        threading.Thread(target=self.http.serve_forever, args=(0.05,), daemon=True).start()
-
-    @property
-    def endpoint(self) -> str:
-        return f"http://127.0.0.1:{self.http.server_address[1]}/v1"
-
-    def close(self) -> None:
-        self.http.shutdown()
-        self.http.server_close()
-
-
-def _answer(text: str):
-    def handler(h: BaseHTTPRequestHandler) -> None:
-        body = json.dumps({"choices": [{"message": {"role": "assistant", "content": text}}]})
-        h.send_response(200)
-        h.send_header("Content-Type", "application/json")
-        h.send_header("Content-Length", str(len(body)))
-        h.end_headers()
-        h.wfile.write(body.encode())
-    return handler
-
-
 def test_vlm_answering_nonsense_fails_and_keeps_the_users_proposals(out):
-    server = Server(_answer("I like turtles. {\"parts\": 42}"))
+    server = Server(answer("I like turtles. {\"parts\": 42}"))
     try:
         before = snapshot(out)
         res = artgs("propose", str(out), "--method", "vlm", "--vlm-endpoint", server.endpoint,
@@ -169,6 +123,15 @@ def test_vlm_answering_nonsense_fails_and_keeps_the_users_proposals(out):
     refused(res, EXIT_FAILED, "found no joints", "proposals.json", "left as it was")
     assert snapshot(out) == before
     assert json.loads((out / layout.PROPOSALS).read_text())["joints"][0]["source"] == "user"
+
+
+def test_optimising_no_joints_without_adding_parts_is_refused(out):
+    write_articulation(out / layout.PROPOSALS, Articulation([], {"source": "motion"}))
+    before = snapshot(out)
+    res = artgs("optimise", str(out), "--no-parts")
+    refused(res, EXIT_BAD_INPUT, "proposals.json", "holds no joints", "--no-parts",
+            "field 'joints'")
+    assert snapshot(out) == before
 
 
 def test_vlm_timeout_is_a_deadline_for_the_whole_request(out):

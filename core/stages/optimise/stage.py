@@ -33,7 +33,7 @@ import torch
 from ...geometry.parts import assign_parts, handle_point
 from ...model import atomic, layout, registry
 from ...model.capture import TRANSFORMS, Capture
-from ...model.errors import InputError
+from ...model.errors import InputError, NothingFound
 from ...model.joints import Articulation, Joint, read_articulation, write_articulation
 from ...model.ply import read_ply
 from ...model.progress import Progress
@@ -124,6 +124,10 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     check(capture, options)
     arrays = read_ply(registry.require(out, layout.SPLAT))
     proposals = read_articulation(registry.require(out, layout.PROPOSALS))
+    if not proposals.joints and not options.parts:
+        raise InputError(out / layout.PROPOSALS, "holds no joints, and --no-parts keeps the "
+                         "optimisation from adding the parts the frames show moving",
+                         field="joints")
     t0 = time.perf_counter()
     dev = resolve_device(options.device)
     torch.manual_seed(options.seed)
@@ -178,6 +182,12 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     losses = evaluate(model, frames, cfg)
     result = export(model, frames, joints, losses, evidence, cfg)
+    if not result:
+        raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
+                           f"frames and the frames show no part moving that the model does not "
+                           f"explain; {layout.ARTICULATION} is left as it was. Check that the "
+                           f"interaction frames show a part moving, or add one by hand "
+                           f"(Bones panel: Add Joint, Save Joints) and optimise again")
     meta = {k: v for k, v in proposals.meta.items() if k != "optimised"}
     articulation = Articulation(result, {**meta, "optimised": True,
                                          "loss": float(losses.mean()), "removed": removed,

@@ -97,6 +97,23 @@ def run(out: Path, capture: Capture, options: ProposeOptions, progress: Progress
             "types": [j.type for j in articulation.joints]}
 
 
+def none_proposed(out: Path, options: dict[str, Any], progress: Progress) -> dict[str, Any]:
+    """``artgs run`` after the route found nothing: OUT/proposals.json with no joints, so the
+    optimisation searches the interaction frames for parts that move (it adds them from what
+    the frames show changing); a run whose optimisation cannot add parts (``--no-parts``) stops
+    here instead, as ``artgs propose`` does."""
+    method = options["propose"].method
+    if not options["optimise"].parts:
+        raise NothingFound(f"the {method} route found no joints and the optimisation may not "
+                           "add parts (--no-parts); " + _NOTHING_FOUND_HINT[method])
+    write_articulation(out / layout.PROPOSALS, Articulation([], {"source": method,
+                                                                 "found": "none"}))
+    progress.log(f"propose: the {method} route found no joints; {layout.PROPOSALS} holds none and "
+                 "the optimisation searches the interaction frames for moving parts",
+                 level="warning")
+    return {"joints": 0, "method": method, "types": [], "found": "none"}
+
+
 def _robot_depth(capture: Capture, options: ProposeOptions):
     """The robot twin's depth per frame (core/stages/robot_twin.py), or None without a twin."""
     if not options.robot_twin:
