@@ -17,7 +17,7 @@ from typing import Any, Callable, Sequence
 from ..model import layout
 from ..model.capture import Capture, load_capture
 from ..model.errors import InputError, NothingFound
-from ..model.joints import Articulation, read_articulation, write_articulation
+from ..model.joints import Articulation, read_articulation
 from ..model.ply import write_ply
 from ..model.progress import QUIET, Progress
 from ..model.registry import ProposeOptions
@@ -106,12 +106,10 @@ def motion_proposals(capture: Capture, out: Path, device: str = "auto",
                      robot_twin: bool = True) -> Articulation:
     """The motion route's proposals, written to OUT; when it finds nothing an empty
     ``Articulation`` is written instead (the optimisation can still add parts)."""
-    from ..stages.propose.stage import propose
+    from ..stages.propose.stage import no_joints, propose
 
     try:
         return propose(capture, out, QUIET, ProposeOptions(method="motion", device=device,
                                                            robot_twin=robot_twin))
     except NothingFound:
-        empty = Articulation([], {"source": "motion"})
-        write_articulation(out / layout.PROPOSALS, empty)
-        return empty
+        return no_joints(out, "motion")

@@ -97,6 +97,14 @@ def run(out: Path, capture: Capture, options: ProposeOptions, progress: Progress
             "types": [j.type for j in articulation.joints]}
 
 
+def no_joints(out: Path, method: str) -> Articulation:
+    """Write OUT/proposals.json with no joints (``"found": "none"``): what a route that found
+    nothing leaves for the optimisation, which may still add parts from the frames."""
+    empty = Articulation([], {"source": method, "found": "none"})
+    write_articulation(out / layout.PROPOSALS, empty)
+    return empty
+
+
 def none_proposed(out: Path, options: dict[str, Any], progress: Progress) -> dict[str, Any]:
     """``artgs run`` after the route found nothing: OUT/proposals.json with no joints, so the
     optimisation searches the interaction frames for parts that move (it adds them from what
@@ -106,8 +114,7 @@ def none_proposed(out: Path, options: dict[str, Any], progress: Progress) -> dic
     if not options["optimise"].parts:
         raise NothingFound(f"the {method} route found no joints and the optimisation may not "
                            "add parts (--no-parts); " + _NOTHING_FOUND_HINT[method])
-    write_articulation(out / layout.PROPOSALS, Articulation([], {"source": method,
-                                                                 "found": "none"}))
+    no_joints(out, method)
     progress.log(f"propose: the {method} route found no joints; {layout.PROPOSALS} holds none and "
                  "the optimisation searches the interaction frames for moving parts",
                  level="warning")
