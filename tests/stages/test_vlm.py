@@ -8,9 +8,7 @@ from __future__ import annotations
 import base64
 import json
 import math
-import threading
 import time
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import Callable
 
@@ -27,61 +25,12 @@ from artgs.core.stages.propose.vlm.propose import box_within
 from artgs.core.stages.propose.vlm.client import VlmConfig, chat, user_message, vlm_config
 from artgs.core.stages.propose.vlm.parse import parse_classification, parse_handle, parse_parts, to_grid1000
 
+from vlm_server import Server, completion, reply  # noqa: E402 - tests/ is on sys.path under pytest
+
 W, H = 160, 120
 
 
-# --- a local OpenAI-compatible server ----------------------------------------------------------
-
-class FakeVlm:
-    """``answer(request_json) -> (status, body_text, delay)``; records every request."""
-
-    def __init__(self, answer: Callable[[dict], tuple[int, str, float]]) -> None:
-        self.answer = answer
-        self.requests: list[tuple[str, dict, dict]] = []
-        fake = self
-
-        class Handler(BaseHTTPRequestHandler):
-            def do_POST(self) -> None:  # noqa: N802
-                body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
-                fake.requests.append((self.path, dict(self.headers), body))
-                status, text, delay = fake.answer(body)
-                time.sleep(delay)
-                data = text.encode()
-                try:
-                    self.send_response(status)
-                    self.send_header("Content-Type", "application/json")
-                    self.send_header("Content-Length", str(len(data)))
-                    self.end_headers()
-                    self.wfile.write(data)
-                except (BrokenPipeError, ConnectionResetError):
-                    pass
-
-            def log_message(self, *args) -> None:
-                pass
-
-        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.server.daemon_threads = True
-        self.server.block_on_close = False  # do not wait for a deliberately slow answer
-        self.thread = threading.Thread(target=self.server.serve_forever, args=(0.05,), daemon=True)
-
-    @property
-    def endpoint(self) -> str:
-        return f"http://127.0.0.1:{self.server.server_address[1]}/v1"
-
-    def __enter__(self) -> "FakeVlm":
-        self.thread.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.server.shutdown()
-        self.server.server_close()
-
-
-def completion(text: str) -> str:
-    return json.dumps({"id": "x", "object": "chat.completion",
-                       "choices": [{"index": 0, "message": {"role": "assistant", "content": text},
-                                    "finish_reason": "stop"}]})
-
+# --- the client against a local OpenAI-compatible server (tests/vlm_server.py) -----------------
 
 def cfg(endpoint: str, **kw) -> VlmConfig:
     kw.setdefault("timeout", 5.0)
@@ -219,13 +168,14 @@ def test_grid_conversion_round_trips():
 
 def test_request_format_image_and_authorization(monkeypatch):
     png = cv2.imencode(".png", np.full((8, 6, 3), 77, np.uint8))[1].tobytes()
-    with FakeVlm(lambda body: (200, completion("This is an oven with 1 movable part."), 0)) as fake:
+    oven = completion("This is an oven with 1 movable part.")
+    with Server(reply(lambda body: (200, oven, 0))) as fake:
         monkeypatch.setenv("ARTGS_VLM_API_KEY", "sk-test-123")
         monkeypatch.setenv("ARTGS_VLM_MODEL", "internvl2_5-4b-artgs")
         config = vlm_config(fake.endpoint, None, timeout=5)
         assert "sk-test-123" not in repr(config)
         assert chat(config, [user_message("What is it?", png)]) == "This is an oven with 1 movable part."
-    path, headers, body = fake.requests[0]
+    path, headers, body, _ = fake.requests[0]
     assert path == "/v1/chat/completions"
     assert headers["Authorization"] == "Bearer sk-test-123"
     assert body["model"] == "internvl2_5-4b-artgs" and body["temperature"] == 0
@@ -250,9 +200,9 @@ def test_no_key_no_authorization_header_and_config_errors(monkeypatch):
     monkeypatch.setenv("ARTGS_VLM_COORDS", "pixels")
     c = vlm_config(None, "m")
     assert (c.endpoint, c.api_key, c.coords) == ("http://example.invalid/v1", None, "pixels")
-    with FakeVlm(lambda body: (200, completion("ok"), 0)) as fake:
+    with Server(reply(lambda body: (200, completion("ok"), 0))) as fake:
         assert chat(cfg(fake.endpoint), [user_message("hi")]) == "ok"
-    assert "Authorization" not in fake.requests[0][1]
+    assert "Authorization" not in fake.requests[0].headers
 
 
 def test_retries_server_errors_then_succeeds():
@@ -262,17 +212,17 @@ def test_retries_server_errors_then_succeeds():
         s = next(statuses)
         return (s, completion("fine") if s == 200 else '{"error": "overloaded"}', 0)
 
-    with FakeVlm(answer) as fake:
+    with Server(reply(answer)) as fake:
         assert chat(cfg(fake.endpoint, retries=2), [user_message("hi")]) == "fine"
     assert len(fake.requests) == 3
-    with FakeVlm(lambda body: (502, "bad gateway", 0)) as fake:
+    with Server(reply(lambda body: (502, "bad gateway", 0))) as fake:
         with pytest.raises(ArtgsError, match=r"HTTP 502.*bad gateway.*after 2 attempts"):
             chat(cfg(fake.endpoint, retries=1), [user_message("hi")])
     assert len(fake.requests) == 2
 
 
 def test_client_error_is_not_retried_and_names_endpoint_status_and_body():
-    with FakeVlm(lambda body: (400, '{"error": "model not found: foo"}', 0)) as fake:
+    with Server(reply(lambda body: (400, '{"error": "model not found: foo"}', 0))) as fake:
         with pytest.raises(ArtgsError) as err:
             chat(cfg(fake.endpoint, retries=3), [user_message("hi")])
     msg = str(err.value)
@@ -281,12 +231,12 @@ def test_client_error_is_not_retried_and_names_endpoint_status_and_body():
 
 
 def test_timeout_and_unreachable_and_bad_body_errors():
-    with FakeVlm(lambda body: (200, completion("late"), 1.0)) as fake:
+    with Server(reply(lambda body: (200, completion("late"), 1.0))) as fake:
         with pytest.raises(ArtgsError, match="no complete answer within 0.2 s"):
             chat(cfg(fake.endpoint, timeout=0.2, retries=3, backoff=0.0), [user_message("hi")])
         time.sleep(0.1)  # a retry would have arrived by now
         assert len(fake.requests) == 1  # a timed-out request is not repeated
-    with FakeVlm(lambda body: (200, "<html>not json</html>", 0)) as fake:
+    with Server(reply(lambda body: (200, "<html>not json</html>", 0))) as fake:
         with pytest.raises(ArtgsError, match="not a chat completion.*not json"):
             chat(cfg(fake.endpoint), [user_message("hi")])
         endpoint = fake.endpoint
@@ -299,7 +249,7 @@ def test_a_local_server_is_reached_without_the_environment_proxy(monkeypatch):
     monkeypatch.setenv("HTTP_PROXY", "http://127.0.0.1:9")
     monkeypatch.delenv("no_proxy", raising=False)
     monkeypatch.delenv("NO_PROXY", raising=False)
-    with FakeVlm(lambda body: (200, completion("direct"), 0)) as fake:
+    with Server(reply(lambda body: (200, completion("direct"), 0))) as fake:
         assert chat(cfg(fake.endpoint, retries=0), [user_message("hi")]) == "direct"
 
 
@@ -504,15 +454,15 @@ def _canned_answers(camera: Camera, joints, broken: int | None = None,
         last = body["messages"][-1]["content"]
         text = last if isinstance(last, str) else last[0]["text"]
         if "What is the object" in text:
-            reply = f"This is a cabinet with {len(joints)} movable parts."
+            said = f"This is a cabinet with {len(joints)} movable parts."
         elif "joint types" in text:
-            reply = " ".join(lines)
+            said = " ".join(lines)
         else:
             asked = np.array([float(v) for v in text.split("[[")[1].split("]]")[0].split(",")])
             asked = asked * np.array([camera.width, camera.height] * 2) / 1000
             k = int(np.argmin([np.abs(b - asked).sum() for b in boxes]))
-            reply = f"Its handle is {_grid(handles[k], camera)}."
-        return 200, completion(reply), 0.0
+            said = f"Its handle is {_grid(handles[k], camera)}."
+        return 200, completion(said), 0.0
     return answer
 
 
@@ -579,7 +529,7 @@ def test_propose_vlm_end_to_end_recovers_the_ground_truth_joints(cabinet, world)
     # without interaction frames the static views' side is used: the same face
     static_only = frontal_camera(Capture(capture.root, capture.static), means, W, H)
     assert _deg(_level(static_only.forward, up), -_level(front, up)) < 3.0
-    with FakeVlm(_canned_answers(camera, gt)) as fake:
+    with Server(reply(_canned_answers(camera, gt))) as fake:
         stream = io.StringIO()
         joints, meta = propose_vlm(capture, gaussians, Progress("json", stream=stream),
                                    VlmConfig(endpoint=fake.endpoint, model="m", width=W, height=H,
@@ -587,7 +537,7 @@ def test_propose_vlm_end_to_end_recovers_the_ground_truth_joints(cabinet, world)
     np.testing.assert_allclose(_view(meta).c2w, camera.c2w)
     assert meta["category"] == "cabinet" and meta["parts_said"] == 2 and meta["skipped"] == []
     assert len(fake.requests) == 2 + len(gt)
-    assert fake.requests[1][2]["messages"][1]["role"] == "assistant"  # bones continues the chat
+    assert fake.requests[1].body["messages"][1]["role"] == "assistant"  # bones continues the chat
     scores = match_joints(joints, gt)
     for s in scores:
         assert s.type_correct, s
@@ -613,7 +563,7 @@ def test_propose_vlm_skips_an_unparseable_part_and_keeps_the_others(cabinet):
     capture, gaussians, gt = cabinet
     camera = frontal_camera(capture, gaussians.means.numpy().astype(float), W, H)
     broken = 1 + next(k for k, j in enumerate(gt) if j.type == "prismatic")
-    with FakeVlm(_canned_answers(camera, gt, broken=broken, stray_handles=True)) as fake:
+    with Server(reply(_canned_answers(camera, gt, broken=broken, stray_handles=True))) as fake:
         stream = io.StringIO()
         joints, meta = propose_vlm(capture, gaussians, Progress("json", stream=stream),
                                    VlmConfig(endpoint=fake.endpoint, model="m", width=W, height=H))
@@ -637,7 +587,7 @@ def test_a_handle_beside_the_hinge_line_lowers_confidence(cabinet):
     camera = frontal_camera(capture, gaussians.means.numpy().astype(float), W, H)
     results = {}
     for wrong in (False, True):
-        with FakeVlm(_canned_answers(camera, gt, wrong_side=wrong)) as fake:
+        with Server(reply(_canned_answers(camera, gt, wrong_side=wrong))) as fake:
             stream = io.StringIO()
             joints, _ = propose_vlm(capture, gaussians, Progress("json", stream=stream),
                                     VlmConfig(endpoint=fake.endpoint, model="m", width=W, height=H))
