@@ -22,7 +22,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..model import registry
-from ..model.errors import InputError
+from ..model.errors import InputError, NothingFound
 from ..model.progress import QUIET, Progress
 from ..model.registry import CheckOptions
 from .options import BenchCheckOptions
@@ -55,7 +55,10 @@ def bench_capture(capture_dir: Path, work: Path, options: BenchCheckOptions,
     result["seconds_per_check"] = (time.perf_counter() - t0) / max(len(result["proposals"]), 1)
     if "optimise" in registry.names():
         optimise = replace(registry.stage("optimise").options(), robot_twin=variant.robot_twin)
-        run_stage("optimise", out, optimise, QUIET, capture=capture)
+        try:
+            run_stage("optimise", out, optimise, QUIET, capture=capture)
+        except NothingFound:     # OUT keeps no-joint proposals: every part counts as not opened
+            pass
         result["optimised"] = check_out(out, urdf, options.robot)
     return result
 

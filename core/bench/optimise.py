@@ -25,7 +25,10 @@ import numpy as np
 
 from ..geometry.metrics import match_joints
 from ..model import layout
-from ..model.joints import Articulation, read_articulation, rotation_about_axis, write_articulation
+from ..model.capture import Capture
+from ..model.errors import NothingFound
+from ..model.joints import (Articulation, Joint, read_articulation, rotation_about_axis,
+                            write_articulation)
 from ..model.progress import QUIET, Progress
 from ..model.registry import OptimiseOptions
 from .options import BenchOptimiseOptions
@@ -54,29 +57,37 @@ def perturbed(joints, rng: np.random.Generator) -> list:
     return out
 
 
+def optimised_joints(out: Path, capture: Capture, options: OptimiseOptions) -> list[Joint]:
+    """``artgs optimise`` on OUT and its joints; none when it finds no moving part (the stage
+    then raises NothingFound and leaves OUT as it was: every true joint counts as missed)."""
+    from ..stages.optimise import optimise
+
+    try:
+        optimise(out, capture, QUIET, options)
+    except NothingFound:
+        return []
+    return read_articulation(out / layout.ARTICULATION).joints
+
+
 def bench_capture(capture_dir: Path, work: Path, options: OptimiseOptions, iterations: int = 0,
                   basin: int = 0, seed: int = 0) -> dict:
     """Propose, optimise and score one capture; plus ``basin`` perturbed-start runs. The
     proposals use the twin as the optimisation does (``options.robot_twin``)."""
-    from ..stages.optimise import optimise
-
     capture, gt, out = prepare(capture_dir, work, iterations, options.device)
     proposals = motion_proposals(capture, out, options.device, options.robot_twin)
     t0, c0 = time.perf_counter(), time.process_time()
-    optimise(out, capture, QUIET, options)
+    after = optimised_joints(out, capture, options)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
-    after = read_articulation(out / layout.ARTICULATION)
     category = gt.meta.get("category", capture_dir.name)
     result = {"capture": capture_dir.name, "category": category, "seconds": seconds,
               "cpu_seconds": cpu,
               "before": _scores(proposals.joints, gt.joints),
-              "after": _scores(after.joints, gt.joints), "basin": []}
+              "after": _scores(after, gt.joints), "basin": []}
     rng = np.random.default_rng([seed, len(capture_dir.name)])
     for _ in range(basin):
         start = perturbed(gt.joints, rng)
         write_articulation(out / layout.PROPOSALS, Articulation(start, {"source": "bench"}))
-        optimise(out, capture, QUIET, options)
-        result["basin"] += _scores(read_articulation(out / layout.ARTICULATION).joints, gt.joints)
+        result["basin"] += _scores(optimised_joints(out, capture, options), gt.joints)
     return result
 
 

@@ -107,3 +107,58 @@ def test_bench_check_optimises_when_nothing_proposed(tmp_path, monkeypatch):
                                   BenchCheckOptions(), variant)
     assert checked == [[], []] and stages == [("optimise", False)]
     assert r["proposals"]["door"]["success"] is False and r["optimised"]["door"]["success"]
+
+
+def test_bench_optimise_scores_an_optimisation_that_finds_nothing_as_missed(tmp_path,
+                                                                            monkeypatch):
+    """The optimise stage raises NothingFound (no part moves as far as the frames tell): the
+    capture is scored, its true joint unmatched (AE 90, type wrong), in the main and basin runs,
+    and the benchmark goes on; a stale articulation.json is not read as the answer."""
+    import artgs.core.stages.optimise as optimise_stage
+    from artgs.core.bench import optimise as bench_optimise
+    from artgs.core.model.joints import Joint, write_articulation
+    from artgs.core.model.registry import OptimiseOptions
+
+    out = tmp_path / "out" / "door_00"
+    out.mkdir(parents=True)
+    truth = Joint("door", "revolute", [0, 0, 1], [0.3, 0.2, 0.0], (0.0, 1.5))
+    gt = Articulation([truth], {"category": "door"})
+    write_articulation(out / "articulation.json", gt)      # stale: must not count
+    monkeypatch.setattr(bench_optimise, "prepare", lambda *a: (object(), gt, out))
+    monkeypatch.setattr(bench_optimise, "motion_proposals",
+                        lambda *a: Articulation([], {"source": "motion"}))
+    calls = []
+
+    def nothing(*args, **kwargs):
+        calls.append(1)
+        raise NothingFound("no moving part found")
+
+    monkeypatch.setattr(optimise_stage, "optimise", nothing)
+    r = bench_optimise.bench_capture(tmp_path / "door_00", tmp_path / "out", OptimiseOptions(),
+                                     basin=1)
+    assert len(calls) == 2
+    for scores in (r["before"], r["after"], r["basin"]):
+        assert [(s["joint"], s["pred"], s["type_ok"], s["ae"]) for s in scores] == \
+            [("door", None, False, 90.0)]
+
+
+def test_bench_check_counts_an_optimisation_that_finds_nothing_as_not_opened(tmp_path,
+                                                                             monkeypatch):
+    """Proposals exist, the optimisation then finds nothing (NothingFound): the optimised row is
+    checked from OUT as the stage left it, and bench-check goes on."""
+    import artgs.core.pipeline as pipeline
+
+    out = tmp_path / "out" / "cabinet_00"
+    out.mkdir(parents=True)
+    monkeypatch.setattr(bench_check, "prepare",
+                        lambda *a: (object(), Articulation([], {"category": "cabinet"}), out))
+    monkeypatch.setattr(bench_check, "motion_proposals", lambda *a: None)
+
+    def nothing(*args, **kwargs):
+        raise NothingFound("no moving part found")
+
+    monkeypatch.setattr(pipeline, "run_stage", nothing)
+    results = iter([{"door": {"success": True}}, {"door": {"success": False}}])
+    monkeypatch.setattr(bench_check, "check_out", lambda *a: next(results))
+    r = bench_check.bench_capture(tmp_path / "cabinet_00", tmp_path / "out", BenchCheckOptions())
+    assert r["proposals"]["door"]["success"] and not r["optimised"]["door"]["success"]
