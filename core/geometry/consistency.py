@@ -76,3 +76,32 @@ def unsupported(points: np.ndarray, frames: list[Frame], margin: float, sigmas: 
             hit |= ~near[ii, jj] & ~hidden
         against[np.flatnonzero(inside)] += hit
     return against >= votes
+
+
+def seen_behind(points: np.ndarray, frames: list[Frame], margin: float, sigmas: float = 3.0
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Per point (N,3), how many static views see past it (a surface measured farther than the
+    point by more than the view's tolerance, ``max(margin, sigmas·√2·σ)``: the point is in space
+    the view saw empty) and how many see a surface in front of it (the point is hidden behind
+    what the view measured). Raw depth, not the mask: a wall behind the object is seen too.
+    Views without depth, outside whose image the point falls or without a measurement at its
+    pixel say nothing. Two int arrays (N,)."""
+    past = np.zeros(len(points), np.int64)
+    behind = np.zeros(len(points), np.int64)
+    for f in frames:
+        if f.depth is None:
+            continue
+        raw = np.nan_to_num(f.depth).astype(np.float32)
+        tol = max(margin, sigmas * math.sqrt(2.0) * noise_sigma([raw]))
+        uv, z = f.camera.project(points)
+        h, w = raw.shape
+        with np.errstate(invalid="ignore"):
+            j = np.floor(uv[:, 0]).astype(np.int64)
+            i = np.floor(uv[:, 1]).astype(np.int64)
+        inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
+        d = raw[i[inside], j[inside]]
+        zi = z[inside]
+        idx = np.flatnonzero(inside)
+        past[idx] += (d > 0) & (d > zi + tol)
+        behind[idx] += (d > 0) & (d < zi - tol)
+    return past, behind

@@ -17,6 +17,7 @@ import torch
 from .fit import evaluate, part_level, search_states
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat
+from .plausible import plausible
 
 #: Relative loss increase below which a part's removal is taken (float noise of the evaluation).
 REMOVE_TOL = 1e-3
@@ -180,13 +181,15 @@ def score_level(frames) -> int:
 def score_at(model: ArticulatedSplat, frames, cfg, k: int, ti: int, values: np.ndarray) -> \
         tuple[float, float]:
     """Lowest image loss (half resolution) at time index ``ti`` over joint ``k``'s candidate ``values``
-    (rad / m), and the value reaching it."""
+    (rad / m) that keep its part out of the body (:func:`.plausible.allowed_values`), and the
+    value reaching it (inf, 0 when none does)."""
     from .fit import frame_loss
+    from .plausible import allowed_values
     level = score_level(frames)
     ids = frames.at_time(ti)
     unit = model.unit_of(model.types[k])
     best = (np.inf, 0.0)
-    for v in values:
+    for v in np.asarray(values)[allowed_values(model, frames, k, values)]:
         model.states[k, ti] = float(v) / unit
         loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids) / len(ids)
         best = min(best, (loss, float(v)))
@@ -226,7 +229,8 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
     (states searched at every time, coarse-to-fine with only this joint free), and so is the
     best of the joint's own type when it scores better than the joint itself (a hinge proposed
     on the wrong edge); the fit with the lowest image loss over the frames where the part moves
-    is kept. Returns per joint the evidence: each type's loss, the kept type, the relative
+    is kept, among those that keep the part out of the body (:func:`.plausible.plausible`)
+    when any does. Returns per joint the evidence: each type's loss, the kept type, the relative
     margin between the types and whether a restart of its own type was kept.
     """
     model, frames, cfg = run.model, run.frames, run.cfg
@@ -262,7 +266,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
                     best[kind] = (loss, axis, point)
                 _restore(model, kept)
                 run.progress.check_cancel()
-        fitted = [(here, kept, False)]
+        fitted = [(here, kept, False, plausible(model, frames, k))]
         losses = {own: here}
         for kind in (other, own):
             if kind not in best or (kind == own and best[kind][0] >= current):
@@ -275,10 +279,12 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
                         free=[i == k for i in range(model.k)], coarse=cfg.coarse,
                         coarse_level=part_level(model, frames, k))
             there = float(evaluate(model, frames, cfg, 0, ids).mean())
-            fitted.append((there, _snapshot(model), kind == own))
+            fitted.append((there, _snapshot(model), kind == own, plausible(model, frames, k)))
             losses[kind] = min(losses.get(kind, np.inf), there)
             _restore(model, kept)
-        _, snap, restarted = min(fitted, key=lambda f: f[0])
+        # a fit that moves its part into the body is no candidate while another keeps it out
+        fitted = [f for f in fitted if f[3]] or fitted
+        _, snap, restarted, _ = min(fitted, key=lambda f: f[0])
         _restore(model, snap)
         kind = model.types[k]
         lo, hi = min(losses.values()), max(losses.values())

@@ -42,6 +42,7 @@ from ...render.device import resolve_device
 from .fit import FitConfig, evaluate, fit, search_states
 from .frames import FrameSet, interaction_frames
 from .occluders import known_occluders
+from .plausible import open_space
 from .model import ArticulatedSplat, Splat
 from .kinematics import REVOLUTE
 
@@ -136,6 +137,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                                 mask_pixels=cfg.mask_pixels)
     splat = Splat.from_arrays(arrays, dev)
     size = object_size(arrays.means)
+    frames.space = open_space(capture.static, size)
     joints = list(proposals.joints)
     labels = assign_parts(arrays.means, joints)
     model = ArticulatedSplat(splat, joints, frames.times, labels, size,
@@ -276,7 +278,7 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             confidence *= min(1.0, 0.5 + 5.0 * max(margin, 0.0))
         if warnings:
             confidence *= 0.5
-        handle = src.handle if src is not None and src.handle else \
+        handle = src.handle if handle_holds(src, kind, pts, model.size) else \
             grasp(model, k, pts, axis, origin, means)
         extra = dict(src.extra) if src is not None else {}
         extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
@@ -291,10 +293,21 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
     return result
 
 
+def handle_holds(src: Joint | None, kind: str, pts: np.ndarray, size: float) -> bool:
+    """Whether the start's handle still serves the fitted joint: the start had one, of the same
+    type (a slide's front handle is no grip on a hinge's free edge), and it lies on the fitted
+    part (a Gaussian of the part within 3 % of the object's size: the part the handle was
+    drawn on may have been another one, or trimmed away)."""
+    if src is None or not src.handle or src.type != kind or not len(pts):
+        return False
+    point = np.asarray(src.handle["point"], float)
+    return bool(np.linalg.norm(pts - point, axis=1).min() <= 0.03 * size)
+
+
 def grasp(model: ArticulatedSplat, k: int, pts: np.ndarray, axis: np.ndarray,
           origin: np.ndarray, means: np.ndarray) -> dict[str, Any] | None:
-    """A handle for a joint its proposal gave none (a part the optimisation added): the grasp
-    point of :func:`handle_point` on the part's front (its mean normal, turned away from the
+    """A handle for a joint whose start gave none that holds (:func:`handle_holds`; a part the
+    optimisation added, a type changed): the grasp point of :func:`handle_point` on the part's front (its mean normal, turned away from the
     object's centre), approached against that normal. None for a part without Gaussians."""
     from .hypotheses import part_normal
     if len(pts) < 3:

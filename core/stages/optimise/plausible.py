@@ -1,0 +1,83 @@
+"""Physical plausibility of a part's motion: an opening part moves into space, not into the body.
+
+The splat holds only what the static (closed) views saw, so a part rotated *into* the object
+(a lid swung down inside its chest, a drawer pushed in) can render as well as the true opening: it
+disappears where the frames show the object's unseen inside. The static depth maps tell the two
+apart without any rendering: a part that opens moves its surface into space the static views saw
+empty (they measured something farther away), one that moves into the body goes behind surfaces
+they measured (:func:`~artgs.core.geometry.consistency.seen_behind`). State candidates that move
+most of a part's visible surface behind measured surfaces are not considered.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...geometry.consistency import seen_behind
+from ...model.capture import Frame
+from ...model.joints import joint_transform
+
+#: share of a part's moved surface hidden behind measured surfaces above which a motion is
+#: implausible (more of it goes into the body than stays out of it)
+HIDDEN_SHARE = 0.5
+
+
+@dataclass
+class OpenSpace:
+    """The static views' depth, asked where a moved part lands; ``margin`` (m) is the smallest
+    displacement and depth gap that counts (the views' own noise widens it)."""
+
+    frames: list[Frame]
+    margin: float
+
+    def hidden_share(self, kind: str, axis: np.ndarray, origin: np.ndarray, value: float,
+                     points: np.ndarray) -> float:
+        """Of ``points`` (a part's closed surface, N×3) that the joint at ``value`` (rad / m)
+        moves by more than the margin, the share that then lie behind a surface some static view
+        measured and in space none saw empty; points already hidden when closed do not count.
+        0 when nothing moves that far."""
+        if not self.frames or not len(points) or value == 0:
+            return 0.0
+        T = joint_transform(kind, axis, origin, value)
+        moved = points @ T[:3, :3].T + T[:3, 3]
+        far = np.linalg.norm(moved - points, axis=1) > self.margin
+        past0, behind0 = seen_behind(points[far], self.frames, self.margin)
+        surface = ~((behind0 > 0) & (past0 == 0))
+        if not surface.any():
+            return 0.0
+        past, behind = seen_behind(moved[far][surface], self.frames, self.margin)
+        return float(((behind > 0) & (past == 0)).mean())
+
+    def allows(self, kind: str, axis: np.ndarray, origin: np.ndarray, value: float,
+               points: np.ndarray) -> bool:
+        """Whether the motion keeps most of the part out of the body (:data:`HIDDEN_SHARE`)."""
+        return self.hidden_share(kind, axis, origin, value, points) <= HIDDEN_SHARE
+
+
+def open_space(static: list[Frame], size: float) -> OpenSpace | None:
+    """The static views with depth as an :class:`OpenSpace` (margin 2 % of the object's
+    ``size``); None without any."""
+    frames = [f for f in static if f.depth is not None]
+    return OpenSpace(frames, 0.02 * size) if frames else None
+
+
+def allowed_values(model, frames, k: int, values: np.ndarray, limit: int = 300) -> np.ndarray:
+    """Which of joint ``k``'s candidate ``values`` (rad / m) keep its part out of the body, by
+    ``frames.space`` (:class:`OpenSpace`; all where the frames have none). Bool per value."""
+    values = np.asarray(values, float)
+    space = getattr(frames, "space", None)
+    if space is None:
+        return np.ones(len(values), bool)
+    pts = model.splat.means.detach().cpu().numpy()[model.labels() == k + 1].astype(float)
+    pts = pts[:: max(1, len(pts) // limit)]
+    axis = model.joint_axes()[k].detach().cpu().numpy().astype(float)
+    origin = model.joint_origins()[k].detach().cpu().numpy().astype(float)
+    return np.array([space.allows(model.types[k], axis, origin, float(v), pts) for v in values])
+
+
+def plausible(model, frames, k: int) -> bool:
+    """Whether joint ``k`` as fitted keeps its part out of the body at its widest state."""
+    v = model.states[k].detach().cpu().numpy() * model.unit_of(model.types[k])
+    return bool(allowed_values(model, frames, k, v[[int(np.argmax(np.abs(v)))]])[0])
