@@ -1,0 +1,59 @@
+"""A part's motion must keep it out of the body: the static views' depth tells opening from
+closing (core/stages/optimise/plausible.py), and the optimisation's grasp handle follows the fit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from artgs.core.geometry.parts import assign_parts
+from artgs.core.model.capture import load_capture
+from artgs.core.model.joints import Joint, read_articulation
+from artgs.core.model.regime import regime
+from artgs.core.stages.optimise.plausible import HIDDEN_SHARE, open_space
+from artgs.core.stages.optimise.stage import handle_holds, object_size
+from artgs.core.stages.reconstruct import initial_splats
+from artgs.core.synth.generate import generate_object
+
+SIZE = {"width": 64, "height": 48, "static_views": 8, "steps": 3}
+
+
+@pytest.fixture(scope="module", params=["cabinet", "chest"])
+def capture(request, tmp_path_factory) -> Path:
+    """A cabinet (door + drawer) and a chest (lid), far noisy cameras for the chest."""
+    root = tmp_path_factory.mktemp("plausible")
+    if request.param == "chest":
+        return generate_object(root / "chest", "chest", 0, regime=regime("realistic"), **SIZE)
+    return generate_object(root / "cabinet", "cabinet", 1, **SIZE)
+
+
+def test_opening_goes_into_space_closing_into_the_body(capture):
+    cap = load_capture(capture)
+    gt = read_articulation(capture / "gt.json")
+    means = initial_splats(cap.static)[0].means.astype(float)
+    space = open_space(cap.static, object_size(means))
+    labels = assign_parts(means, gt.joints)
+    for k, j in enumerate(gt.joints):
+        pts = means[labels == k + 1]
+        assert len(pts) > 20, j.name
+        opening = 0.8 * j.limit[1]
+        out = space.hidden_share(j.type, j.axis, j.origin, opening, pts)
+        into = space.hidden_share(j.type, j.axis, j.origin, -opening, pts)
+        assert out < HIDDEN_SHARE < into, (j.name, out, into)
+        assert space.hidden_share(j.type, j.axis, j.origin, 0.0, pts) == 0.0
+
+
+def _joint(kind: str, point) -> Joint:
+    return Joint(name="door", type=kind, axis=np.array([0.0, 0.0, 1.0]),
+                 origin=np.zeros(3), handle={"point": list(point), "approach": [1.0, 0, 0]})
+
+
+def test_start_handle_kept_only_on_the_fitted_part_of_the_same_type():
+    pts = np.random.default_rng(0).uniform([0, 0, 0], [0.02, 0.4, 0.6], size=(500, 3))
+    on, off = [0.01, 0.3, 0.3], [0.01, 0.3, 0.9]
+    assert handle_holds(_joint("revolute", on), "revolute", pts, size=1.0)
+    assert not handle_holds(_joint("prismatic", on), "revolute", pts, size=1.0)
+    assert not handle_holds(_joint("revolute", off), "revolute", pts, size=1.0)
+    assert not handle_holds(None, "revolute", pts, size=1.0)
