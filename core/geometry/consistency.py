@@ -78,21 +78,17 @@ def unsupported(points: np.ndarray, frames: list[Frame], margin: float, sigmas: 
     return against >= votes
 
 
-def seen_behind(points: np.ndarray, frames: list[Frame], margin: float, sigmas: float = 3.0
+def seen_behind(points: np.ndarray, views: list[tuple[Frame, np.ndarray, float]]
                 ) -> tuple[np.ndarray, np.ndarray]:
     """Per point (N,3), how many static views see past it (a surface measured farther than the
-    point by more than the view's tolerance, ``max(margin, sigmas·√2·σ)``: the point is in space
-    the view saw empty) and how many see a surface in front of it (the point is hidden behind
-    what the view measured). Raw depth, not the mask: a wall behind the object is seen too.
-    Views without depth, outside whose image the point falls or without a measurement at its
-    pixel say nothing. Two int arrays (N,)."""
+    point by more than the view's tolerance: the point is in space the view saw empty) and how
+    many see a surface in front of it (the point is hidden behind what the view measured).
+    ``views``: per view its frame, raw depth and tolerance (:func:`depth_views`). Views outside
+    whose image the point falls or without a measurement at its pixel say nothing. Two int
+    arrays (N,)."""
     past = np.zeros(len(points), np.int64)
     behind = np.zeros(len(points), np.int64)
-    for f in frames:
-        if f.depth is None:
-            continue
-        raw = np.nan_to_num(f.depth).astype(np.float32)
-        tol = max(margin, sigmas * math.sqrt(2.0) * noise_sigma([raw]))
+    for f, raw, tol in views:
         uv, z = f.camera.project(points)
         h, w = raw.shape
         with np.errstate(invalid="ignore"):
@@ -105,3 +101,17 @@ def seen_behind(points: np.ndarray, frames: list[Frame], margin: float, sigmas: 
         past[idx] += (d > 0) & (d > zi + tol)
         behind[idx] += (d > 0) & (d < zi - tol)
     return past, behind
+
+
+def depth_views(frames: list[Frame], margin: float, sigmas: float = 3.0
+                ) -> list[tuple[Frame, np.ndarray, float]]:
+    """The frames with depth, each with its raw depth (not masked: a wall behind the object is
+    seen too; 0 where not measured) and its tolerance ``max(margin, sigmas·√2·σ)``, σ its depth
+    noise (:func:`noise_sigma`), for :func:`seen_behind`."""
+    views = []
+    for f in frames:
+        if f.depth is None:
+            continue
+        raw = np.nan_to_num(f.depth).astype(np.float32)
+        views.append((f, raw, max(margin, sigmas * math.sqrt(2.0) * noise_sigma([raw]))))
+    return views

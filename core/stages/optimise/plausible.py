@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...geometry.consistency import seen_behind
+from ...geometry.consistency import depth_views, seen_behind
 from ...model.capture import Frame
 from ...model.joints import joint_transform
 
@@ -29,7 +29,7 @@ class OpenSpace:
     """The static views' depth, asked where a moved part lands; ``margin`` (m) is the smallest
     displacement and depth gap that counts (the views' own noise widens it)."""
 
-    frames: list[Frame]
+    views: list[tuple[Frame, np.ndarray, float]]     # :func:`depth_views`
     margin: float
 
     def hidden_share(self, kind: str, axis: np.ndarray, origin: np.ndarray, value: float,
@@ -38,16 +38,16 @@ class OpenSpace:
         moves by more than the margin, the share that then lie behind a surface some static view
         measured and in space none saw empty; points already hidden when closed do not count.
         0 when nothing moves that far."""
-        if not self.frames or not len(points) or value == 0:
+        if not self.views or not len(points) or value == 0:
             return 0.0
         T = joint_transform(kind, axis, origin, value)
         moved = points @ T[:3, :3].T + T[:3, 3]
         far = np.linalg.norm(moved - points, axis=1) > self.margin
-        past0, behind0 = seen_behind(points[far], self.frames, self.margin)
+        past0, behind0 = seen_behind(points[far], self.views)
         surface = ~((behind0 > 0) & (past0 == 0))
         if not surface.any():
             return 0.0
-        past, behind = seen_behind(moved[far][surface], self.frames, self.margin)
+        past, behind = seen_behind(moved[far][surface], self.views)
         return float(((behind > 0) & (past == 0)).mean())
 
     def allows(self, kind: str, axis: np.ndarray, origin: np.ndarray, value: float,
@@ -59,8 +59,8 @@ class OpenSpace:
 def open_space(static: list[Frame], size: float) -> OpenSpace | None:
     """The static views with depth as an :class:`OpenSpace` (margin 2 % of the object's
     ``size``); None without any."""
-    frames = [f for f in static if f.depth is not None]
-    return OpenSpace(frames, 0.02 * size) if frames else None
+    views = depth_views(static, 0.02 * size)
+    return OpenSpace(views, 0.02 * size) if views else None
 
 
 def allowed_values(model, frames, k: int, values: np.ndarray, limit: int = 300) -> np.ndarray:
