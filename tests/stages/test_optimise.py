@@ -333,7 +333,7 @@ def test_changes_point_at_the_moving_parts(cabinet, tmp_path):
     from artgs.core.model.ply import read_ply
     from artgs.core.stages.optimise.fit import FitConfig
     from artgs.core.stages.optimise.frames import interaction_frames
-    from artgs.core.stages.optimise.hypotheses import seen_static, unexplained
+    from artgs.core.stages.optimise.seen import seen_static, unexplained
     from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
     gt = read_articulation(cabinet / "gt.json")
     out = _out(tmp_path, cabinet, [])

@@ -303,3 +303,15 @@ class ArticulatedSplat:
         self.names.append(name)
         self.types.append(kind)
         return self.k - 1
+
+
+def snapshot(model: ArticulatedSplat) -> tuple:
+    """The model's joint types, axes, points and states (copies), for :func:`restore`."""
+    return (list(model.types), model.axes.detach().clone(), model.origins.detach().clone(),
+            model.states.detach().clone())
+
+
+def restore(model: ArticulatedSplat, snap: tuple) -> None:
+    """Take back the joints of a :func:`snapshot`."""
+    model.types = list(snap[0])
+    model.axes, model.origins, model.states = (t.clone() for t in snap[1:])

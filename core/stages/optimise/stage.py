@@ -9,11 +9,11 @@ behind them). Nothing is written before the end: a cancel or a failure leaves OU
 Steps (each fit is :func:`.fit.fit`):
 1. start from the proposals: part of each Gaussian from the joints' ``extent`` boxes; states
    from the proposal or, where it has none, a search per time; each part trimmed to the
-   Gaussians where the frames show it changing (:func:`.hypotheses.trim_parts`);
+   Gaussians where the frames show it changing (:func:`.seen.trim_parts`);
 2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
 3. type by evidence, then spurious parts (:mod:`.hypotheses`);
 4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
-   missed parts where the frames change and the model does not (:func:`.hypotheses.add_missed`),
+   missed parts where the frames change and the model does not (:func:`.missed.add_missed`),
    then, if any was added, step 4's fits again (at half length) and the spurious-part test;
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
 5. report per joint residual, observed range and confidence.
@@ -117,7 +117,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
              options: OptimiseOptions | None = None,
              config: FitConfig | None = None) -> dict[str, Any]:
     """Optimise the proposals of ``out`` against ``capture``; writes the outputs (module doc)."""
-    from . import hypotheses
+    from . import hypotheses, missed, seen
 
     options = options or OptimiseOptions()
     cfg = config or FitConfig()
@@ -158,7 +158,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     for k, j in enumerate(joints):
         if not j.states:
             search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
-    trimmed = hypotheses.trim_parts(run, locked=model.locked.tolist()) if options.parts else {}
+    trimmed = seen.trim_parts(run, locked=model.locked.tolist()) if options.parts else {}
     run.run_fit(n, "joints", 0.25, coarse=cfg.coarse)
     evidence: dict[str, dict[str, Any]] = {}
     if options.types and model.k:
@@ -172,7 +172,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     refine(run, n, share=0.28)
     added: list[str] = []
     if options.parts:
-        added = hypotheses.add_missed(run, share=0.05)
+        added = missed.add_missed(run, share=0.05)
     if added and options.types:   # the new parts' types by the same evidence
         evidence.update(hypotheses.select_types(run, share=0.0,
                                                 fixed=[name not in added for name in model.names]))

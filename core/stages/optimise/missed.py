@@ -1,0 +1,150 @@
+"""Missed parts: where the frames change and the model does not, a new part is fitted and kept only
+when it clearly lowers the image loss; a new part that moves with an existing one is merged."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from .fit import evaluate, part_level, search_states
+from .hypotheses import (REMOVE_TOL, box_edges, clearly_better, key_time, part_normal,
+                         part_points, score_at, state_candidates)
+from .kinematics import PRISMATIC, REVOLUTE
+from .model import ArticulatedSplat, restore, snapshot
+from .seen import unexplained
+
+
+def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
+    """Connected groups of ``points`` (neighbours closer than 3 median neighbour distances),
+    largest first, each of at least ``min_size`` points; index arrays."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+    if len(points) < min_size:
+        return []
+    tree = cKDTree(points)
+    d = tree.query(points, 2)[0][:, 1]
+    pairs = tree.query_pairs(3 * float(np.median(d)), output_type="ndarray")
+    n = len(points)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    groups = [np.flatnonzero(comp == c) for c in np.unique(comp)]
+    return sorted([g for g in groups if len(g) >= min_size], key=len, reverse=True)
+
+def first_mover(points: np.ndarray, onset: np.ndarray, min_size: int, link: int = 2
+                ) -> np.ndarray | None:
+    """Of changed points (N,3) with the time step each started to change, the part that moves
+    first in the largest group: the group's most common onset within ``link`` steps, its largest
+    connected piece (parts side by side that move at different times are split; what a moving
+    part hid or uncovered starts with it and stays). Index array, or None."""
+    groups = clusters(points, min_size)
+    if not groups:
+        return None
+    g = groups[0]
+    mode = int(np.bincount(onset[g]).argmax())
+    sub = g[np.abs(onset[g] - mode) <= link]
+    pieces = clusters(points[sub], min_size)
+    return sub[pieces[0]] if pieces else None
+
+def add_missed(run, share: float, tries: int = 3) -> list[str]:
+    """Missed parts, one at a time: Gaussians of the base where the frames show changes the model
+    does not (:func:`unexplained`), grouped into connected clusters (at least 1 % of the
+    Gaussians), of which the part that starts moving first (:func:`first_mover`) becomes a part
+    hypothesis: hinges at its box edges and slides
+    along its normal and box axes are scored by rendering at its key time, the best is fitted,
+    and the part is kept only if it clearly lowers the image loss of the frames where it moves
+    (:func:`clearly_better`). A kept part explains
+    its changes (and those of what it hid), so the changes are found again before the next of
+    at most ``tries`` parts. Returns the names of the added joints."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    means = model.splat.means.cpu().numpy().astype(float)
+    added: list[str] = []
+    steps = max(run.options.iterations // 2, 1)
+    for attempt in range(tries):
+        hits = unexplained(model, frames, cfg)
+        flagged = np.flatnonzero(hits.any(0))
+        g = first_mover(means[flagged], hits[:, flagged].argmax(0),
+                        max(10, model.splat.n // 100))
+        if g is None:
+            break
+        members = np.zeros(model.splat.n, bool)
+        members[flagged[g]] = True
+        before_frames = evaluate(model, frames, cfg)
+        before = float(before_frames.mean())
+        kept = snapshot(model)
+        name = f"part_{len(model.names) + 1}"
+        while name in model.names:
+            name += "_"
+        k = model.add(name, REVOLUTE, np.array([0.0, 0.0, 1.0]), means[members].mean(0), members)
+        run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
+        pts = part_points(model, k)
+        hyps = [(REVOLUTE, a, p) for a, p in box_edges(pts)]
+        hyps += [(PRISMATIC, d, pts.mean(0)) for d in
+                 [part_normal(model, k)] + list(np.linalg.svd(pts - pts.mean(0))[2])]
+        key = key_time(model, frames, cfg, k)
+        scored = []
+        for kind, axis, point in hyps:
+            model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+            scored.append((score_at(model, frames, cfg, k, key, state_candidates(model, k))[0],
+                           kind, axis, point))
+            run.progress.check_cancel()
+        # the best-scoring hypothesis is fitted; if it does not explain the frames better, the
+        # best of the other type is (a small part's score at one time can mislead)
+        order = sorted(scored, key=lambda s: s[0])
+        first = order[0][1]
+        second = [s for s in order if s[1] != first][:1]
+        for _, kind, axis, point in order[:1] + second:
+            model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+            search_states(model, frames, k, cfg, state_candidates(model, k))
+            run.run_fit(steps, f"new part {name} as {kind}", share / tries / 2,
+                        free=[i == k for i in range(model.k)], coarse=cfg.coarse,
+                        coarse_level=part_level(model, frames, k))
+            after_frames = evaluate(model, frames, cfg)
+            after = float(after_frames.mean())
+            # a part the optimisation invents has only the loss it lowers as evidence: over
+            # all frames, not on the frames it picks itself (the local test is for proposals)
+            gain = clearly_better(before_frames, after_frames, [])
+            if gain:
+                break
+        run.progress.log(f"{name}: {len(g)} Gaussians where the frames change and the model "
+                         f"does not; as a {kind} part the image loss is {after:.5f} "
+                         f"(without {before:.5f})")
+        if not gain:
+            model.drop(k)
+            run.trust = run.trust[:-1]
+            restore(model, kept)
+            break
+        into = merge_target(model, frames, cfg, k, after)
+        if into is None:
+            added.append(name)
+            continue
+        run.progress.log(f"{name}: moves with {model.names[into]}; merged into its part")
+        fitted = snapshot(model)
+        model.reassign(model.labels() == k + 1, into + 1)
+        model.drop(k)
+        run.trust = run.trust[:-1]
+        restore(model, (fitted[0][:-1], fitted[1][:-1], fitted[2][:-1], fitted[3][:-1]))
+    return added
+
+@torch.no_grad()
+def merge_target(model: ArticulatedSplat, frames, cfg, k: int, loss: float) -> int | None:
+    """The joint of the same type whose motion explains joint ``k``'s part as well as ``k`` does
+    (within ``REMOVE_TOL`` of ``loss``, the image loss over all frames): a new part that is the
+    rest of an existing one (Gaussians its box missed) is merged into it. None if none."""
+    best = None
+    hard = model.hard.clone()
+    members = torch.as_tensor(model.labels() == k + 1, device=hard.device)
+    for j in range(model.k):
+        if j == k or model.types[j] != model.types[k]:
+            continue
+        h = hard.clone()
+        h[members] = j + 1
+        model.hard = h
+        states = model.states.clone()
+        model.states = states.clone()
+        model.states[k] = 0.0
+        merged = float(evaluate(model, frames, cfg).mean())
+        model.states, model.hard = states, hard
+        if merged <= loss * (1 + REMOVE_TOL) and (best is None or merged < best[0]):
+            best = (merged, j)
+    return None if best is None else best[1]
