@@ -40,6 +40,19 @@ def masked_depth(f: Frame) -> np.ndarray:
     return d
 
 
+def pixels_of(f: Frame, points: np.ndarray, shape: tuple[int, int]
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Which ``points`` fall inside frame ``f``'s image (of ``shape``) in front of its camera
+    (bool (N,)), and for those their pixel row, column and depth."""
+    uv, z = f.camera.project(points)
+    h, w = shape
+    with np.errstate(invalid="ignore"):
+        j = np.floor(uv[:, 0]).astype(np.int64)
+        i = np.floor(uv[:, 1]).astype(np.int64)
+    inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
+    return inside, i[inside], j[inside], z[inside]
+
+
 def unsupported(points: np.ndarray, frames: list[Frame], margin: float, sigmas: float = 5.0,
                 mask_pixels: int = 3, votes: int = 2) -> np.ndarray:
     """Points (N,3) that ``votes`` or more static views contradict (bool (N,)).
@@ -59,20 +72,14 @@ def unsupported(points: np.ndarray, frames: list[Frame], margin: float, sigmas: 
         d_obj = masked_depth(f)
         lo, _ = depth_range(d_obj)
         tol = max(margin, sigmas * math.sqrt(2.0) * noise_sigma([d_obj]))
-        uv, z = f.camera.project(points)
-        h, w = lo.shape
-        with np.errstate(invalid="ignore"):
-            j = np.floor(uv[:, 0]).astype(np.int64)
-            i = np.floor(uv[:, 1]).astype(np.int64)
-        inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
-        ii, jj = i[inside], j[inside]
+        inside, ii, jj, zi = pixels_of(f, points, lo.shape)
         d = lo[ii, jj]
-        hit = (d > 0) & (d - z[inside] > tol)
+        hit = (d > 0) & (d - zi > tol)
         if f.mask is not None:
             near = binary_dilation(f.mask.astype(bool), iterations=mask_pixels) \
                 if mask_pixels > 0 else f.mask.astype(bool)
             raw = np.nan_to_num(f.depth)[ii, jj]
-            hidden = (raw > 0) & (raw < z[inside] - tol)
+            hidden = (raw > 0) & (raw < zi - tol)
             hit |= ~near[ii, jj] & ~hidden
         against[np.flatnonzero(inside)] += hit
     return against >= votes
@@ -89,14 +96,8 @@ def seen_behind(points: np.ndarray, views: list[tuple[Frame, np.ndarray, float]]
     past = np.zeros(len(points), np.int64)
     behind = np.zeros(len(points), np.int64)
     for f, raw, tol in views:
-        uv, z = f.camera.project(points)
-        h, w = raw.shape
-        with np.errstate(invalid="ignore"):
-            j = np.floor(uv[:, 0]).astype(np.int64)
-            i = np.floor(uv[:, 1]).astype(np.int64)
-        inside = (z > 1e-3) & (i >= 0) & (i < h) & (j >= 0) & (j < w)
-        d = raw[i[inside], j[inside]]
-        zi = z[inside]
+        inside, ii, jj, zi = pixels_of(f, points, raw.shape)
+        d = raw[ii, jj]
         idx = np.flatnonzero(inside)
         past[idx] += (d > 0) & (d > zi + tol)
         behind[idx] += (d > 0) & (d < zi - tol)
