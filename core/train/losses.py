@@ -61,8 +61,7 @@ def view_loss(r: RenderOutput, v: View, w: LossWeights, depth_unit: float) -> to
 def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb: float = 0.1,
                       sigma_depth: float = 2.0, sigma_alpha: float = 0.5,
                       lambda_ssim: float = 0.2, noise_sigmas: float = 0.0,
-                      exposure: bool = False, closed: RenderOutput | None = None
-                      ) -> torch.Tensor:
+                      exposure: bool = False) -> torch.Tensor:
     """A loss that pixels no model explains cannot drag (an unseen interior revealed by an open
     door, an arm, a shadow, a flying depth pixel).
 
@@ -86,13 +85,6 @@ def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb:
 
     Where ``v.occluder_depth`` shows something that is not the object (an arm, a hand), a render
     whose surface there lies behind it (or is empty) is not compared: the object is hidden there.
-
-    ``closed``: the same model with every part at rest, seen by the same view. Where a moving
-    part uncovered a pixel (covered when closed, empty now), the model knows nothing of what lies
-    behind the part's closed surface (a splat of the closed object has no inside): where the
-    frame measures a surface clearly behind the part's closed one (it sees into the space the
-    part left) the pixel costs nothing; elsewhere (the part's surface still there, nothing
-    measured) it is compared as any other.
     """
     v = matched_mask(r, v)
     rgb = r.rgb * exposure_gain(r, v) if exposure else r.rgb
@@ -102,18 +94,13 @@ def robust_image_loss(r: RenderOutput, v: View, *, depth_unit: float, sigma_rgb:
                         torch.zeros_like(r.depth))
     alpha = (r.alpha - v.mask).abs() / sigma_alpha
     res = colour + depth + alpha
-    skip = torch.zeros_like(res, dtype=torch.bool)
     if v.occluder_depth is not None:
         occ = v.occluder_depth
-        skip |= (occ > 0) & ((r.depth <= 0) | (r.depth > occ - scale))
-    if closed is not None:
-        uncovered = (closed.alpha > 0.5) & (r.alpha < 0.5)
-        skip |= uncovered & v.depth_valid & (v.depth > closed.depth + scale)
-    skip = skip.detach()
-    res = torch.where(skip, torch.zeros_like(res), res)
+        hidden = (occ > 0) & ((r.depth <= 0) | (r.depth > occ - scale))
+        res = torch.where(hidden.detach(), torch.zeros_like(res), res)
     loss = (res / (1 + res)).sum() / v.pixels
     if lambda_ssim:
-        loss = loss + lambda_ssim * (1 - ssim(rgb, v.rgb, ((res.detach() < 1) & ~skip).float()))
+        loss = loss + lambda_ssim * (1 - ssim(rgb, v.rgb, (res.detach() < 1).float()))
     return loss
 
 

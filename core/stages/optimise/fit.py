@@ -30,7 +30,6 @@ class FitConfig:
     sigma_alpha: float = 0.5
     noise_sigmas: float = 3.0          # depth scale at least this many of the camera's noise
     exposure: bool = True              # colour compared after the frame's exposure gain
-    revealed: bool = True              # pixels a moving part uncovers claim only free space
     mask_pixels: int = 2               # masks may be this many pixels too wide or narrow
     lambda_smooth: float = 0.05        # kNN smoothness of the skinning weights
     lambda_entropy: float = 0.02       # low entropy: parts are rigid
@@ -54,23 +53,10 @@ def frame_loss(model: ArticulatedSplat, frames: FrameSet, level: int, i: int,
     sigmas (large: L1-like, every pixel pulls)."""
     v = frames.levels[level][i]
     r = model.render(v, frames.time_index[i], cfg.backend)
-    closed = closed_render(model, frames, level, i, cfg) if cfg.revealed else None
     return robust_image_loss(r, v, depth_unit=0.01 * model.size, sigma_rgb=cfg.sigma_rgb * widen,
                              sigma_depth=cfg.sigma_depth * widen,
                              sigma_alpha=cfg.sigma_alpha * widen, lambda_ssim=cfg.lambda_ssim,
-                             noise_sigmas=cfg.noise_sigmas * widen, exposure=cfg.exposure,
-                             closed=closed)
-
-
-@torch.no_grad()
-def closed_render(model: ArticulatedSplat, frames: FrameSet, level: int, i: int,
-                  cfg: FitConfig):
-    """The model with every part at rest seen by frame ``i``'s view at ``level`` (cached: the
-    canonical splat does not change during the optimisation; camera corrections are left out)."""
-    key = (level, i)
-    if key not in frames.closed:
-        frames.closed[key] = model.render(frames.levels[level][i], None, cfg.backend)
-    return frames.closed[key]
+                             noise_sigmas=cfg.noise_sigmas * widen, exposure=cfg.exposure)
 
 
 @torch.no_grad()

@@ -10,7 +10,7 @@ their unmasked colour.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import torch
@@ -30,7 +30,6 @@ class FrameSet:
     camera: list[int]                # per frame: fixed-camera index (order of first appearance)
     levels: list[list[View]]
     space: Any = None                # the static views' open space (plausible.OpenSpace) or None
-    closed: dict = field(default_factory=dict)   # (level, frame) -> the model's closed render
 
     def at_time(self, ti: int) -> list[int]:
         """Frame indices of time index ``ti``."""

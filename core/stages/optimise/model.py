@@ -167,10 +167,10 @@ class ArticulatedSplat:
             return skin_rigid(s.means, s.quats, self.hard, R, t, q)
         return skin(s.means, s.quats, self.weights(), R, t, q)
 
-    def render(self, view, ti: int | None, backend: str = "auto"):
-        """The posed splat at time index ``ti`` (None: closed, every part at rest) seen by
-        ``view``, with the view's known occluder Gaussians (a robot twin) rendered in."""
-        means, quats = self.posed(ti) if ti is not None else (self.splat.means, self.splat.quats)
+    def render(self, view, ti: int, backend: str = "auto"):
+        """The posed splat at time index ``ti`` seen by ``view``, with the view's known occluder
+        Gaussians (a robot twin) rendered in."""
+        means, quats = self.posed(ti)
         if self.refine_cameras:
             c = self.cameras[self.camera_of[view.index]]
             means, quats = camera_motion(means, quats, view.w2c, c[:3], c[3:] * self.size)
