@@ -115,7 +115,9 @@ def test_holdout_views_are_never_used(capture):
         # rel 1e-4: numba's multi-threaded gradient sums differ in the last bits run to run
         # (1.0e-5 measured on one CPU); a used garbage view would change the loss by far more.
         assert a == pytest.approx(b, rel=1e-4)
-    np.testing.assert_allclose(tr.splat().means, tr2.splat().means, atol=1e-6)
+    # 1e-4 m: threaded sums under load move a few means by ~2e-6 m (measured in CI); a used
+    # garbage view moves them by millimetres or more
+    np.testing.assert_allclose(tr.splat().means, tr2.splat().means, atol=1e-4)
 
 
 def test_cancel_leaves_previous_splat(capture, tmp_path):

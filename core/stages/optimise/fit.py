@@ -160,13 +160,10 @@ def part_level(model: ArticulatedSplat, frames: FrameSet, k: int, min_pixels: in
 def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitConfig,
                   candidates: np.ndarray) -> None:
     """Set joint ``k``'s state at every moving time to the candidate value (rad / m) with the
-    lowest image loss at the coarsest level (others as they are); values that move the part into
-    the body (:func:`.plausible.allowed_values`) are not tried."""
-    from .plausible import allowed_values
+    lowest image loss at the coarsest level (others as they are)."""
     level = len(frames.levels) - 1
     unit = model.unit_of(model.types[k])
     states = model.states.clone()
-    candidates = np.asarray(candidates)[allowed_values(model, frames, k, candidates)]
     for ti, t in enumerate(frames.times):
         if t == 0:
             continue

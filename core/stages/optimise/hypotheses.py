@@ -20,7 +20,6 @@ import torch
 from .fit import evaluate, part_level, search_states
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
-from .plausible import plausible
 from .seen import seen_moving
 
 #: Relative loss increase below which a part's removal is taken (float noise of the evaluation).
@@ -166,15 +165,13 @@ def score_level(frames) -> int:
 def score_at(model: ArticulatedSplat, frames, cfg, k: int, ti: int, values: np.ndarray) -> \
         tuple[float, float]:
     """Lowest image loss (half resolution) at time index ``ti`` over joint ``k``'s candidate ``values``
-    (rad / m) that keep its part out of the body (:func:`.plausible.allowed_values`), and the
-    value reaching it (inf, 0 when none does)."""
+    (rad / m), and the value reaching it."""
     from .fit import frame_loss
-    from .plausible import allowed_values
     level = score_level(frames)
     ids = frames.at_time(ti)
     unit = model.unit_of(model.types[k])
     best = (np.inf, 0.0)
-    for v in np.asarray(values)[allowed_values(model, frames, k, values)]:
+    for v in values:
         model.states[k, ti] = float(v) / unit
         loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids) / len(ids)
         best = min(best, (loss, float(v)))
@@ -211,8 +208,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
     (states searched at every time, coarse-to-fine with only this joint free), and so is the
     best of the joint's own type when it scores better than the joint itself (a hinge proposed
     on the wrong edge); the fit with the lowest image loss over the frames where the part moves
-    is kept, among those that keep the part out of the body (:func:`.plausible.plausible`)
-    when any does. Returns per joint the evidence: each type's loss, the kept type, the relative
+    is kept. Returns per joint the evidence: each type's loss, the kept type, the relative
     margin between the types and whether a restart of its own type was kept.
     """
     model, frames, cfg = run.model, run.frames, run.cfg
@@ -248,7 +244,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
                     best[kind] = (loss, axis, point)
                 restore(model, kept)
                 run.progress.check_cancel()
-        fitted = [(here, kept, False, plausible(model, frames, k))]
+        fitted = [(here, kept, False)]
         losses = {own: here}
         for kind in (other, own):
             if kind not in best or (kind == own and best[kind][0] >= current):
@@ -261,12 +257,10 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
                         free=[i == k for i in range(model.k)], coarse=cfg.coarse,
                         coarse_level=part_level(model, frames, k))
             there = float(evaluate(model, frames, cfg, 0, ids).mean())
-            fitted.append((there, snapshot(model), kind == own, plausible(model, frames, k)))
+            fitted.append((there, snapshot(model), kind == own))
             losses[kind] = min(losses.get(kind, np.inf), there)
             restore(model, kept)
-        # a fit that moves its part into the body is no candidate while another keeps it out
-        fitted = [f for f in fitted if f[3]] or fitted
-        _, snap, restarted, _ = min(fitted, key=lambda f: f[0])
+        _, snap, restarted = min(fitted, key=lambda f: f[0])
         restore(model, snap)
         kind = model.types[k]
         lo, hi = min(losses.values()), max(losses.values())

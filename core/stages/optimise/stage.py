@@ -42,7 +42,7 @@ from ...render.device import resolve_device
 from .fit import FitConfig, evaluate, fit, search_states
 from .frames import FrameSet, interaction_frames
 from .occluders import known_occluders
-from .plausible import open_space
+from .plausible import HIDDEN_SHARE, into_body, open_space
 from .model import ArticulatedSplat, Splat
 from .kinematics import REVOLUTE
 
@@ -238,7 +238,8 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
 
     confidence = 1 / (1 + residual), times min(1, 0.5 + 5 × type margin) when both types were
     fitted (a 10 % lower loss than the other type counts as decisive), halved when the evidence
-    is weak (under 10° or 5 % of the object size of motion seen, or under 50 Gaussians).
+    is weak (under 10° or 5 % of the object size of motion seen, or under 50 Gaussians) or the
+    part opens into the body (:func:`.plausible.into_body`).
     """
     labels = model.labels()
     means = model.splat.means.cpu().numpy()
@@ -272,6 +273,11 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             warnings.append("little motion seen")
         if len(pts) < 50:
             warnings.append("part has few Gaussians")
+        inside = into_body(model, frames, k)
+        if inside > HIDDEN_SHARE:
+            warnings.append(f"opens into the body ({100 * inside:.0f} % of its surface goes "
+                            f"behind what the static views measured): check the joint's "
+                            f"direction and line")
         margin = ev.get("margin")
         confidence = 1.0 / (1.0 + residual)
         if margin is not None:
@@ -282,7 +288,7 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             grasp(model, k, pts, axis, origin, means)
         extra = dict(src.extra) if src is not None else {}
         extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
-                     evidence=ev, warnings=warnings)
+                     evidence=ev, warnings=warnings, into_body=round(inside, 4))
         result.append(Joint(
             name=name, type=kind, axis=axis, origin=origin, limit=(lo, hi),
             parent=src.parent if src else "base", child=src.child if src else f"{name}_link",
