@@ -11,7 +11,6 @@ their unmasked colour.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -29,7 +28,6 @@ class FrameSet:
     time_index: list[int]            # per frame: its time's index in ``times``
     camera: list[int]                # per frame: fixed-camera index (order of first appearance)
     levels: list[list[View]]
-    space: Any = None                # the static views' open space (plausible.OpenSpace) or None
 
     def at_time(self, ti: int) -> list[int]:
         """Frame indices of time index ``ti``."""

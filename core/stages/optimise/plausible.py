@@ -60,16 +60,12 @@ def open_space(static: list[Frame], size: float) -> OpenSpace | None:
     return OpenSpace(views, 0.02 * size) if views else None
 
 
-def into_body(model, frames, k: int, limit: int = 300) -> float:
-    """Share of joint ``k``'s part surface that its widest fitted state moves behind surfaces the
-    static views measured (:meth:`OpenSpace.hidden_share`; 0 where ``frames.space`` is None)."""
-    space = getattr(frames, "space", None)
-    if space is None:
+def into_body(space: OpenSpace | None, kind: str, axis: np.ndarray, origin: np.ndarray,
+              values: np.ndarray, points: np.ndarray, limit: int = 300) -> float:
+    """Share of a part's surface (``points``, its closed Gaussians; an even subsample of at most
+    ``limit``) that the joint's widest state among ``values`` (rad / m) moves behind surfaces the
+    static views measured (:meth:`OpenSpace.hidden_share`); 0 without ``space`` or values."""
+    if space is None or not len(values):
         return 0.0
-    pts = model.splat.means.detach().cpu().numpy()[model.labels() == k + 1].astype(float)
-    pts = pts[:: max(1, len(pts) // limit)]
-    v = model.states[k].detach().cpu().numpy() * model.unit_of(model.types[k])
-    widest = float(v[int(np.argmax(np.abs(v)))]) if len(v) else 0.0
-    axis = model.joint_axes()[k].detach().cpu().numpy().astype(float)
-    origin = model.joint_origins()[k].detach().cpu().numpy().astype(float)
-    return space.hidden_share(model.types[k], axis, origin, widest, pts)
+    widest = float(values[int(np.argmax(np.abs(values)))])
+    return space.hidden_share(kind, axis, origin, widest, points[:: max(1, len(points) // limit)])

@@ -42,7 +42,7 @@ from ...render.device import resolve_device
 from .fit import FitConfig, evaluate, fit, search_states
 from .frames import FrameSet, interaction_frames
 from .occluders import known_occluders
-from .plausible import HIDDEN_SHARE, into_body, open_space
+from .plausible import HIDDEN_SHARE, OpenSpace, into_body, open_space
 from .model import ArticulatedSplat, Splat
 from .kinematics import REVOLUTE
 
@@ -137,7 +137,6 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                                 mask_pixels=cfg.mask_pixels)
     splat = Splat.from_arrays(arrays, dev)
     size = object_size(arrays.means)
-    frames.space = open_space(capture.static, size)
     joints = list(proposals.joints)
     labels = assign_parts(arrays.means, joints)
     model = ArticulatedSplat(splat, joints, frames.times, labels, size,
@@ -183,7 +182,8 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
         added = [name for name in added if name not in again]
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     losses = evaluate(model, frames, cfg)
-    result = export(model, frames, joints, losses, evidence, cfg)
+    result = export(model, frames, joints, losses, evidence, cfg,
+                    open_space(capture.static, size))
     if not result:
         raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
                            f"frames and the frames show no part moving that the model does not "
@@ -233,13 +233,14 @@ def write_labels(path: Path, labels: np.ndarray) -> None:
 
 
 def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losses: np.ndarray,
-           evidence: dict[str, dict[str, Any]], cfg: FitConfig) -> list[Joint]:
+           evidence: dict[str, dict[str, Any]], cfg: FitConfig,
+           space: OpenSpace | None) -> list[Joint]:
     """The fitted joints with states, observed range as limit, residual and confidence.
 
     confidence = 1 / (1 + residual), times min(1, 0.5 + 5 × type margin) when both types were
     fitted (a 10 % lower loss than the other type counts as decisive), halved when the evidence
     is weak (under 10° or 5 % of the object size of motion seen, or under 50 Gaussians) or the
-    part opens into the body (:func:`.plausible.into_body`).
+    part opens into the body (:func:`.plausible.into_body` in ``space``, the static views).
     """
     labels = model.labels()
     means = model.splat.means.cpu().numpy()
@@ -273,7 +274,7 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             warnings.append("little motion seen")
         if len(pts) < 50:
             warnings.append("part has few Gaussians")
-        inside = into_body(model, frames, k)
+        inside = into_body(space, kind, axis, origin, values, pts)
         if inside > HIDDEN_SHARE:
             warnings.append(f"opens into the body ({100 * inside:.0f} % of its surface goes "
                             f"behind what the static views measured): check the joint's "
@@ -313,8 +314,9 @@ def handle_holds(src: Joint | None, kind: str, pts: np.ndarray, size: float) -> 
 def grasp(model: ArticulatedSplat, k: int, pts: np.ndarray, axis: np.ndarray,
           origin: np.ndarray, means: np.ndarray) -> dict[str, Any] | None:
     """A handle for a joint whose start gave none that holds (:func:`handle_holds`; a part the
-    optimisation added, a type changed): the grasp point of :func:`handle_point` on the part's front (its mean normal, turned away from the
-    object's centre), approached against that normal. None for a part without Gaussians."""
+    optimisation added, a type changed): the grasp point of :func:`handle_point` on the part's
+    front (its mean normal, turned away from the object's centre), approached against that
+    normal. None for a part without Gaussians."""
     from .hypotheses import part_normal
     if len(pts) < 3:
         return None
