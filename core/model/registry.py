@@ -91,6 +91,9 @@ class OptimiseOptions:
     seed: int = option(0, "random seed of the frame sampling")
     cameras: bool = option(False, "learn a small correction (rotation, translation) of each fixed "
                            "interaction camera (--no-cameras: take them as registered)")
+    depth: bool = option(True, "refine each joint last on the interaction frames' depth, kept "
+                         "unless the image loss says it is worse (--no-depth: the rendering "
+                         "fit's joints)")
     device: str = _device()
     max_side: int = _max_side()
     robot_twin: bool = _robot_twin()

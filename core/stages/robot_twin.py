@@ -62,6 +62,14 @@ class RobotTwin:
         poses = link_poses(self.chain, self.model.full_positions(q), base)
         return np.stack([poses[k] for k in self.links])
 
+    def tool_pose(self, q, base: np.ndarray | None = None) -> np.ndarray:
+        """World <- tool (4x4): the end-effector link at ``q``, moved ``tcp_offset`` along its z
+        axis to the point between the fingertips, where the hand holds a handle."""
+        T = link_poses(self.chain, self.model.full_positions(q), base)[self.model.end_effector]
+        tcp = np.eye(4)
+        tcp[2, 3] = self.model.tcp_offset
+        return T @ tcp
+
     def posed_points(self, q, base: np.ndarray | None = None) -> np.ndarray:
         """The Gaussians' centres in the world at ``q`` (numpy, for geometry tests)."""
         T = self.link_transforms(q, base)[self.link_of]
@@ -109,6 +117,21 @@ def twin_for_capture(capture: Capture, device="cpu", spacing: float = SPACING
         q = frame.robot_joint_positions
         return None if q is None else twin.gaussians(q, base, device)
     return pose
+
+
+def tool_path(capture: Capture) -> dict[int, np.ndarray]:
+    """Per interaction time with robot joint positions, the robot's tool pose (world <- tool,
+    :meth:`RobotTwin.tool_pose`; the first such frame of the time); empty when the capture has no
+    known robot or no joint positions. A hand that holds a part while it moves moves with it, so
+    the path is evidence of the joint (core/stages/optimise/hypotheses.py)."""
+    if robot_model(capture.robot) is None:
+        return {}
+    twin = robot_twin(capture.robot)
+    path: dict[int, np.ndarray] = {}
+    for f in capture.interaction:
+        if f.time is not None and f.robot_joint_positions is not None and int(f.time) not in path:
+            path[int(f.time)] = twin.tool_pose(f.robot_joint_positions, capture.robot_base_pose)
+    return path
 
 
 def twin_depth_for_capture(capture: Capture, device="cpu", spacing: float = SPACING

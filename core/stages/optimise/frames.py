@@ -10,7 +10,9 @@ their unmasked colour.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+
+import numpy as np
 
 import torch
 import torch.nn.functional as F
@@ -28,6 +30,7 @@ class FrameSet:
     time_index: list[int]            # per frame: its time's index in ``times``
     camera: list[int]                # per frame: fixed-camera index (order of first appearance)
     levels: list[list[View]]
+    tool: dict[int, np.ndarray] = field(default_factory=dict)   # time -> robot tool pose (4x4)
 
     def at_time(self, ti: int) -> list[int]:
         """Frame indices of time index ``ti``."""

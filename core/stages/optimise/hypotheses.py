@@ -156,6 +156,51 @@ def hypotheses_of(model: ArticulatedSplat, k: int, kind: str, members: np.ndarra
         hyps.append((REVOLUTE, axis, point, values))
     return hyps
 
+def tool_hypotheses(model: ArticulatedSplat, frames, k: int, min_move: float = 0.02
+                    ) -> list[tuple[str, np.ndarray, np.ndarray, None]]:
+    """Joint ``k`` from the robot's tool path (``frames.tool``, time -> world <- tool pose), when
+    the capture has one: a hand that holds a handle moves with it, so the tool's positions at
+    the times the part moves lie on a circle about the hinge, or on a line along the slide. The
+    times taken are those where the part has just moved (its fitted state changed from the time
+    before by over 5 % of its range): whoever moved it holds it then, while before a motion the
+    hand may still hold another part. Only positions are used: a grasp holds a handle's
+    position firmly but may let it turn (and an arm's IK trades orientation for reach). Gives
+    a hinge (normal of the positions' plane, through the centre of their circle, the point
+    nearest the part) when there are three or more, and a slide (their principal direction),
+    both scored by rendering like any other hypothesis: a tool that held another part, or none,
+    only adds losing ones. Empty without a path, with under two such times, or when the tool
+    moved less than ``min_move`` of the object size."""
+    if not frames.tool:
+        return []
+    v = model.states[k].detach().cpu().numpy() * model.moving.cpu().numpy()
+    span = float(max(v.max(), 0.0) - min(v.min(), 0.0))
+    if span <= 0:
+        return []
+    times = [frames.times[ti] for ti in range(1, len(v))
+             if abs(v[ti] - v[ti - 1]) > 0.05 * span and frames.times[ti] in frames.tool]
+    path = np.array([frames.tool[t][:3, 3] for t in times]).reshape(-1, 3)
+    if len(path) < 2 or np.linalg.norm(path - path[0], axis=1).max() < min_move * model.size:
+        return []
+    pts = part_points(model, k)
+    centre = pts.mean(0) if len(pts) else path.mean(0)
+    _, _, vt = np.linalg.svd(path - path.mean(0), full_matrices=False)
+    hyps: list[tuple[str, np.ndarray, np.ndarray, None]] = [(PRISMATIC, vt[0], centre, None)]
+    hinge = circle_centre(path, vt) if len(path) >= 3 else None
+    if hinge is not None and np.linalg.norm(hinge - path.mean(0)) < 10 * model.size:
+        axis = vt[2]
+        hyps.insert(0, (REVOLUTE, axis, hinge + ((centre - hinge) @ axis) * axis, None))
+    return hyps
+
+def circle_centre(path: np.ndarray, basis: np.ndarray) -> np.ndarray | None:
+    """Centre of the circle through ``path`` (M,3) in the plane of ``basis``'s first two rows
+    (algebraic least squares, x² + y² + D x + E y + F = 0); None when the points are collinear."""
+    xy = (path - path.mean(0)) @ basis[:2].T
+    A = np.column_stack([xy, np.ones(len(xy))])
+    sol, *_ = np.linalg.lstsq(A, -(xy ** 2).sum(1), rcond=None)
+    if not np.all(np.isfinite(sol)) or np.linalg.cond(A) > 1e8:
+        return None
+    return path.mean(0) + (-sol[:2] / 2) @ basis[:2]
+
 def score_level(frames) -> int:
     """Pyramid level of hypothesis scoring: half resolution (the coarsest can be too small to
     see a part's motion)."""
@@ -203,7 +248,8 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
     """Keep, per joint, the type and line whose fit explains the frames where it moves best.
 
     ``fixed`` joints (trusted user joints, locked joints) keep their type and line. The joint's
-    hypotheses of both types (:func:`hypotheses_of`) are scored by rendering at half resolution
+    hypotheses of both types (:func:`tool_hypotheses` when a robot held the parts,
+    :func:`hypotheses_of`) are scored by rendering at half resolution
     at the time the part moves most (its value searched). The best of the other type is fitted
     (states searched at every time, coarse-to-fine with only this joint free), and so is the
     best of the joint's own type when it scores better than the joint itself (a hinge proposed
@@ -221,7 +267,9 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
         own = model.types[k]
         other = PRISMATIC if own == REVOLUTE else REVOLUTE
         core = seen_moving(model, frames, cfg, k)
-        hyps = {t: hypotheses_of(model, k, t, core)[:tries] for t in (own, other)}
+        tool = tool_hypotheses(model, frames, k)
+        hyps = {t: [h for h in tool if h[0] == t] + hypotheses_of(model, k, t, core)[:tries]
+                for t in (own, other)}
         if not ids or not hyps[other]:
             run.done += share / len(todo)
             continue

@@ -16,6 +16,7 @@ Steps (each fit is :func:`.fit.fit`):
    missed parts where the frames change and the model does not (:func:`.missed.add_missed`),
    then, if any was added, step 4's fits again (at half length) and the spurious-part test;
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
+   each joint refined last on the frames' depth (:mod:`.depth_fit`);
 5. report per joint residual, observed range and confidence.
 """
 
@@ -39,8 +40,10 @@ from ...model.ply import read_ply
 from ...model.progress import Progress
 from ...model.registry import OptimiseOptions
 from ...render.device import resolve_device
+from .depth_fit import refine_on_depth
 from .fit import FitConfig, evaluate, fit, search_states
 from .frames import FrameSet, interaction_frames
+from ..robot_twin import tool_path
 from .occluders import known_occluders
 from .plausible import HIDDEN_SHARE, OpenSpace, into_body, open_space
 from .model import ArticulatedSplat, Splat
@@ -135,6 +138,8 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     frames = interaction_frames(capture, dev, occluders=known_occluders(capture, dev,
                                                                        options.robot_twin),
                                 mask_pixels=cfg.mask_pixels)
+    if options.robot_twin:
+        frames.tool = tool_path(capture)
     splat = Splat.from_arrays(arrays, dev)
     size = object_size(arrays.means)
     joints = list(proposals.joints)
@@ -181,9 +186,10 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
         removed += [name for name in again if name not in added]
         added = [name for name in added if name not in again]
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
+    depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
     losses = evaluate(model, frames, cfg)
     result = export(model, frames, joints, losses, evidence, cfg,
-                    open_space(capture.static, size))
+                    open_space(capture.static, size), depth)
     if not result:
         raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
                            f"frames and the frames show no part moving that the model does not "
@@ -197,7 +203,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
                "trimmed": trimmed,
                "cameras": camera_corrections(model),
-               "kept_start": kept_start, "added": added,
+               "kept_start": kept_start, "added": added, "depth": depth,
                "types": [j.type for j in result],
                "seconds": round(time.perf_counter() - t0, 2)}
     write_labels(out / layout.PART_LABELS, model.labels())
@@ -234,13 +240,16 @@ def write_labels(path: Path, labels: np.ndarray) -> None:
 
 def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losses: np.ndarray,
            evidence: dict[str, dict[str, Any]], cfg: FitConfig,
-           space: OpenSpace | None) -> list[Joint]:
+           space: OpenSpace | None, depth: dict[str, dict[str, Any]] | None = None
+           ) -> list[Joint]:
     """The fitted joints with states, observed range as limit, residual and confidence.
 
     confidence = 1 / (1 + residual), times min(1, 0.5 + 5 × type margin) when both types were
     fitted (a 10 % lower loss than the other type counts as decisive), halved when the evidence
     is weak (under 10° or 5 % of the object size of motion seen, or under 50 Gaussians) or the
     part opens into the body (:func:`.plausible.into_body` in ``space``, the static views).
+    ``depth``: per joint the report of the depth refinement (:mod:`.depth_fit`), kept in the
+    joint's ``extra["depth_fit"]``.
     """
     labels = model.labels()
     means = model.splat.means.cpu().numpy()
@@ -290,6 +299,8 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
         extra = dict(src.extra) if src is not None else {}
         extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
                      evidence=ev, warnings=warnings, into_body=round(inside, 4))
+        if depth and name in depth:
+            extra["depth_fit"] = depth[name]
         result.append(Joint(
             name=name, type=kind, axis=axis, origin=origin, limit=(lo, hi),
             parent=src.parent if src else "base", child=src.child if src else f"{name}_link",

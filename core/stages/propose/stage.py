@@ -68,8 +68,8 @@ def propose(capture: Capture, out: str | Path, progress: Progress,
         from .motion.route import propose_motion
         opacity = 1.0 / (1.0 + np.exp(-np.asarray(arrays.opacity_logits, float)))
         joints, meta = propose_motion(capture, arrays.means, opacity,
-                                      lambda camera: _render_depth(arrays, camera, options.device),
-                                      progress, robot_depth=_robot_depth(capture, options))
+                                      lambda camera: splat_depth(arrays, camera, options.device),
+                                      progress, robot_depth=twin_depth(capture, options.robot_twin, options.device))
     else:
         from ...render.gaussians import Gaussians
         from .vlm.propose import propose_vlm
@@ -121,16 +121,17 @@ def none_proposed(out: Path, options: dict[str, Any], progress: Progress) -> dic
     return {"joints": 0, "method": method, "types": [], "found": "none"}
 
 
-def _robot_depth(capture: Capture, options: ProposeOptions):
-    """The robot twin's depth per frame (core/stages/robot_twin.py), or None without a twin."""
-    if not options.robot_twin:
+def twin_depth(capture: Capture, use_twin: bool, device: str):
+    """The robot twin's depth per frame (core/stages/robot_twin.py), or None without a twin (or
+    with ``use_twin`` off, the ablation)."""
+    if not use_twin:
         return None
     from ...render.device import resolve_device
     from ..robot_twin import twin_depth_for_capture
-    return twin_depth_for_capture(capture, resolve_device(options.device))
+    return twin_depth_for_capture(capture, resolve_device(device))
 
 
-def _render_depth(arrays, camera, device: str) -> np.ndarray:
+def splat_depth(arrays, camera, device: str) -> np.ndarray:
     """Depth of the splat seen by ``camera`` (for interaction cameras without a time-0 frame)."""
     import torch
 
