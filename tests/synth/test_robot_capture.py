@@ -131,17 +131,17 @@ def test_optimisation_with_the_arm_in_view(capture_dir, tmp_path):
 
 
 def test_tool_path_gives_the_hinge(capture_dir):
-    """The tool is at the handle at every interaction time, and its path (at the times the door
-    has just moved) yields a hinge within 3 degrees and 2 cm of the true one, and a slide
-    hypothesis too; a wrong-type start (the door as a slide, with the true states as slide
-    values) finds the same times. Without a path there are no such hypotheses."""
+    """The tool is at the handle at every interaction time, and its path is one run
+    (one part held) that yields a hinge within 3 degrees and 2 cm of the true one, and a slide
+    hypothesis; the path of two parts held one after the other splits into two runs at the
+    jump. Without a path there are no such hypotheses."""
     import torch
 
     from artgs.core.geometry.metrics import score_pair
     from artgs.core.geometry.parts import assign_parts
     from artgs.core.model.joints import Joint
     from artgs.core.stages.optimise.frames import interaction_frames
-    from artgs.core.stages.optimise.hypotheses import tool_hypotheses
+    from artgs.core.stages.optimise.hypotheses import tool_hypotheses, tool_segments
     from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
     from artgs.core.stages.robot_twin import tool_path
 
@@ -155,15 +155,17 @@ def test_tool_path_gives_the_hinge(capture_dir):
         assert np.linalg.norm(P[:3, 3] - handle) < 0.015
     frames = interaction_frames(capture, torch.device("cpu"))
     splat, _ = initial_splats(capture.static)
-    slide = Joint(name=gt.name, type="prismatic", axis=np.array([1.0, 0, 0]), origin=gt.origin,
-                  states={t: 0.1 * v for t, v in gt.states.items()})
-    for start in (gt, slide):
-        model = ArticulatedSplat(Splat.from_arrays(splat, torch.device("cpu")), [start],
-                                 frames.times, assign_parts(splat.means, [gt]), 1.0, [False])
-        assert tool_hypotheses(model, frames, 0) == []
-        frames.tool = path
-        hyps = tool_hypotheses(model, frames, 0)
-        frames.tool = {}
-        assert [h[0] for h in hyps] == ["revolute", "prismatic"]
-        s = score_pair(Joint(name="h", type="revolute", axis=hyps[0][1], origin=hyps[0][2]), gt)
-        assert s.axis_error_deg < 3.0 and s.origin_error_cm < 2.0, s
+    model = ArticulatedSplat(Splat.from_arrays(splat, torch.device("cpu")), [gt], frames.times,
+                             assign_parts(splat.means, [gt]), 1.0, [False])
+    assert tool_hypotheses(model, frames, 0) == []
+    frames.tool = path
+    hyps = tool_hypotheses(model, frames, 0)
+    assert [h[0] for h in hyps] == ["revolute", "prismatic"]
+    s = score_pair(Joint(name="h", type="revolute", axis=hyps[0][1], origin=hyps[0][2]), gt)
+    assert s.axis_error_deg < 3.0 and s.origin_error_cm < 2.0, s
+    # a second part held after a jump: the door's path, then a slide 40 cm away
+    door = np.array([path[t][:3, 3] for t in sorted(path)])
+    slide = door[-1] + np.array([0.4, 0.0, 0.0]) + np.outer(np.arange(5) * 0.05, [0.0, 1.0, 0.0])
+    runs = tool_segments(np.concatenate([door, slide]), 0.01, 0.02)
+    assert [r.tolist() for r in runs] == [list(range(len(door))),
+                                          list(range(len(door), len(door) + 5))]

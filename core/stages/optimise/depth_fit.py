@@ -25,7 +25,13 @@ from ..propose.motion.track import visible_filter
 from ..propose.stage import splat_depth, twin_depth
 from .fit import evaluate
 from .hypotheses import REMOVE_TOL, moving_frames, part_points
+from .kinematics import REVOLUTE
 from .model import restore, snapshot
+
+#: A refinement that turns the axis further (degrees) or moves a hinge line further (x object
+#: size) is another joint, not the last decimals: it must lower the image loss to be kept.
+MAX_TURN = 2.0
+MAX_SHIFT = 0.02
 
 
 def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None = None
@@ -69,10 +75,13 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
         refined.update(zip(moving, map(float, new.values)))
         model.set_type(k, model.types[k], new.axis, new.origin, refined)
         there = float(evaluate(model, frames, cfg, 0, ids).mean())
-        keep = there <= here * (1 + REMOVE_TOL)
+        turn = float(np.degrees(np.arccos(np.clip(abs(new.axis @ axis), -1, 1))))
+        shift = float(np.linalg.norm(np.cross(new.origin - origin, axis))) \
+            if model.types[k] == REVOLUTE else 0.0
+        small = turn <= MAX_TURN and shift <= MAX_SHIFT * model.size
+        keep = there <= here * (1 + REMOVE_TOL) if small else there < here * (1 - REMOVE_TOL)
         if not keep:
             restore(model, kept)
-        turn = float(np.degrees(np.arccos(np.clip(abs(new.axis @ axis), -1, 1))))
         report[model.names[k]] = {"loss_before": round(here, 6), "loss_after": round(there, 6),
                                   "kept": keep, "turned_deg": round(turn, 4)}
         run.progress.log(f"{model.names[k]}: refined on the depth (axis turned {turn:.3f} deg, "

@@ -156,40 +156,64 @@ def hypotheses_of(model: ArticulatedSplat, k: int, kind: str, members: np.ndarra
         hyps.append((REVOLUTE, axis, point, values))
     return hyps
 
-def tool_hypotheses(model: ArticulatedSplat, frames, k: int, min_move: float = 0.02
+def tool_hypotheses(model: ArticulatedSplat, frames, k: int
                     ) -> list[tuple[str, np.ndarray, np.ndarray, None]]:
-    """Joint ``k`` from the robot's tool path (``frames.tool``, time -> world <- tool pose), when
-    the capture has one: a hand that holds a handle moves with it, so the tool's positions at
-    the times the part moves lie on a circle about the hinge, or on a line along the slide. The
-    times taken are those where the part has just moved (its fitted state changed from the time
-    before by over 5 % of its range): whoever moved it holds it then, while before a motion the
-    hand may still hold another part. Only positions are used: a grasp holds a handle's
-    position firmly but may let it turn (and an arm's IK trades orientation for reach). Gives
-    a hinge (normal of the positions' plane, through the centre of their circle, the point
-    nearest the part) when there are three or more, and a slide (their principal direction),
-    both scored by rendering like any other hypothesis: a tool that held another part, or none,
-    only adds losing ones. Empty without a path, with under two such times, or when the tool
-    moved less than ``min_move`` of the object size."""
+    """Joints from the robot's tool path (``frames.tool``, time -> world <- tool pose), when the
+    capture has one, placed at part ``k``: a hand that holds a handle moves with it, so while it
+    holds one part its positions lie on a circle about the hinge or a line along the slide
+    (:func:`tool_segments`). Per segment a hinge (normal of the positions' plane, through the
+    centre of their circle, at the point nearest the part) when it turns, and a slide (its
+    principal direction). Only positions are used: a grasp holds a handle's position firmly but
+    may let it turn (and an arm's IK trades orientation for reach). Which segment, if any, is
+    part ``k``'s is left to rendering: they are scored like any other hypothesis, and those of
+    other parts (or of the hand's approach) lose."""
     if not frames.tool:
         return []
-    v = model.states[k].detach().cpu().numpy() * model.moving.cpu().numpy()
-    span = float(max(v.max(), 0.0) - min(v.min(), 0.0))
-    if span <= 0:
-        return []
-    times = [frames.times[ti] for ti in range(1, len(v))
-             if abs(v[ti] - v[ti - 1]) > 0.05 * span and frames.times[ti] in frames.tool]
-    path = np.array([frames.tool[t][:3, 3] for t in times]).reshape(-1, 3)
-    if len(path) < 2 or np.linalg.norm(path - path[0], axis=1).max() < min_move * model.size:
-        return []
     pts = part_points(model, k)
+    times = sorted(frames.tool)
+    path = np.array([frames.tool[t][:3, 3] for t in times])
     centre = pts.mean(0) if len(pts) else path.mean(0)
-    _, _, vt = np.linalg.svd(path - path.mean(0), full_matrices=False)
-    hyps: list[tuple[str, np.ndarray, np.ndarray, None]] = [(PRISMATIC, vt[0], centre, None)]
-    hinge = circle_centre(path, vt) if len(path) >= 3 else None
-    if hinge is not None and np.linalg.norm(hinge - path.mean(0)) < 10 * model.size:
-        axis = vt[2]
-        hyps.insert(0, (REVOLUTE, axis, hinge + ((centre - hinge) @ axis) * axis, None))
+    hyps: list[tuple[str, np.ndarray, np.ndarray, None]] = []
+    for seg in tool_segments(path, 0.01 * model.size, 0.02 * model.size):
+        P = path[seg]
+        _, _, vt = np.linalg.svd(P - P.mean(0), full_matrices=False)
+        hinge = circle_centre(P, vt) if len(np.unique(P.round(6), axis=0)) >= 3 else None
+        if hinge is not None and np.linalg.norm(hinge - P.mean(0)) < 10 * model.size:
+            hyps.append((REVOLUTE, vt[2], hinge + ((centre - hinge) @ vt[2]) * vt[2], None))
+        hyps.append((PRISMATIC, vt[0], centre, None))
     return hyps
+
+def tool_segments(path: np.ndarray, tol: float, min_move: float) -> list[np.ndarray]:
+    """Runs of consecutive positions of ``path`` (T,3) that one circle or line explains within
+    ``tol`` (RMS, m), each grown as far as it goes; those spanning at least ``min_move``.
+    Index arrays."""
+    segments, a = [], 0
+    while a < len(path) - 1:
+        b = a + 2
+        while b <= len(path) and path_residual(path[a:b]) <= tol:
+            b += 1
+        seg = np.arange(a, b - 1)
+        if len(seg) >= 2 and np.linalg.norm(path[seg] - path[seg[0]], axis=1).max() >= min_move:
+            segments.append(seg)
+        a = max(b - 1, a + 1)   # the next run starts after this one (a jump between parts)
+    return segments
+
+def path_residual(P: np.ndarray) -> float:
+    """RMS distance (m) of the positions ``P`` from their best line or circle (whichever is
+    closer); 0 for two positions."""
+    if len(P) < 3:
+        return 0.0
+    c = P.mean(0)
+    _, _, vt = np.linalg.svd(P - c, full_matrices=False)
+    d = P - c
+    line = float(np.sqrt(np.mean(np.sum((d - np.outer(d @ vt[0], vt[0])) ** 2, 1))))
+    hinge = circle_centre(P, vt)
+    if hinge is None:
+        return line
+    xy = (P - hinge) @ vt[:2].T
+    r = np.linalg.norm(xy, axis=1)
+    circle = float(np.sqrt(np.mean((r - r.mean()) ** 2 + (d @ vt[2]) ** 2)))
+    return min(line, circle)
 
 def circle_centre(path: np.ndarray, basis: np.ndarray) -> np.ndarray | None:
     """Centre of the circle through ``path`` (M,3) in the plane of ``basis``'s first two rows
