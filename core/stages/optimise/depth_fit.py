@@ -71,7 +71,8 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
                            max_distance=max(0.05, 4 * thr), point_weight=mc.refine_point_weight)
         here = float(evaluate(model, frames, cfg, 0, ids).mean())
         kept = snapshot(model)
-        refined = dict(values)
+        sign = 1.0 if new.axis @ axis >= 0 else -1.0    # refine_joint may flip axis and values
+        refined = {t: sign * v for t, v in values.items()}
         refined.update(zip(moving, map(float, new.values)))
         model.set_type(k, model.types[k], new.axis, new.origin, refined)
         there = float(evaluate(model, frames, cfg, 0, ids).mean())
