@@ -17,8 +17,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ...geometry.rigid import JointFit, StepData, refine_joint
+from ...geometry.rigid import JointFit, StepData
 from ...model.capture import Capture
+from ..propose.motion.assemble import refine_on_steps
 from ..propose.motion.cameras import make_views, step_cloud
 from ..propose.motion.config import MotionConfig
 from ..propose.motion.track import visible_filter
@@ -53,8 +54,7 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
         if bool(model.locked[k]) or not ids:
             continue
         values = model.joint_values(k)
-        top = max(abs(v) for v in values.values())
-        moving = [t for t in model.times if abs(values[t]) > 0.1 * top]
+        moving = sorted({model.times[frames.time_index[i]] for i in ids})
         for t in moving:
             if t not in clouds:
                 P, N, _ = step_cloud(views, t)
@@ -67,8 +67,7 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
         origin = model.joint_origins()[k].detach().cpu().numpy().astype(float)
         start = JointFit(model.types[k], axis, origin, np.array([values[t] for t in moving]),
                          np.nan, np.nan, 0.0)
-        new = refine_joint(start, pts, steps, rounds=mc.refine_rounds, min_distance=thr / 2,
-                           max_distance=max(0.05, 4 * thr), point_weight=mc.refine_point_weight)
+        new = refine_on_steps(start, pts, steps, thr, mc, mc.refine_rounds)
         here = float(evaluate(model, frames, cfg, 0, ids).mean())
         kept = snapshot(model)
         sign = 1.0 if new.axis @ axis >= 0 else -1.0    # refine_joint may flip axis and values

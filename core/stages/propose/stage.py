@@ -69,7 +69,8 @@ def propose(capture: Capture, out: str | Path, progress: Progress,
         opacity = 1.0 / (1.0 + np.exp(-np.asarray(arrays.opacity_logits, float)))
         joints, meta = propose_motion(capture, arrays.means, opacity,
                                       lambda camera: splat_depth(arrays, camera, options.device),
-                                      progress, robot_depth=twin_depth(capture, options.robot_twin, options.device))
+                                      progress, robot_depth=twin_depth(
+                                          capture, options.robot_twin, options.device))
     else:
         from ...render.gaussians import Gaussians
         from .vlm.propose import propose_vlm

@@ -18,6 +18,14 @@ from .parts import box_of
 from .track import Track, projective_score
 
 
+def refine_on_steps(fit, St: np.ndarray, steps: list[StepData], thr: float, cfg: MotionConfig,
+                    rounds: int):
+    """``rounds`` of :func:`refine_joint` of ``fit`` with the part points ``St`` on the measured
+    ``steps``, with the distances of views whose change threshold is ``thr`` (m)."""
+    return refine_joint(fit, St, steps, rounds=rounds, min_distance=thr / 2,
+                        max_distance=max(0.05, 4 * thr), point_weight=cfg.refine_point_weight)
+
+
 def refine_fit(fit, St: np.ndarray, steps: list[StepData], views: list[InteractionView],
                moving: list[int], thr: float, cfg: MotionConfig):
     """Refine the joint on the measurements with the splat's own part points (unbiased by
@@ -26,8 +34,7 @@ def refine_fit(fit, St: np.ndarray, steps: list[StepData], views: list[Interacti
     more than the refinement recovers); the start whose refined joint best explains the depth
     maps (:func:`projective_score` over the steps) is refined to the end."""
     def refined(f, rounds: int):
-        return refine_joint(f, St, steps, rounds=rounds, min_distance=thr / 2,
-                            max_distance=max(0.05, 4 * thr), point_weight=cfg.refine_point_weight)
+        return refine_on_steps(f, St, steps, thr, cfg, rounds)
 
     def score(f) -> float:
         return float(np.mean([projective_score(St, joint_transform(f.type, f.axis, f.origin, v),
