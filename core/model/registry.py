@@ -88,6 +88,9 @@ class OptimiseOptions:
                          "keep the proposals' types)")
     parts: bool = option(True, "remove parts the frames do not show moving and add parts they "
                          "show moving that no joint explains (--no-parts: the proposed parts)")
+    assign: bool = option(True, "give each Gaussian to the part whose motion the frames' depth "
+                          "supports, kept when it lowers the image loss (--no-assign: the "
+                          "skinning's parts)")
     seed: int = option(0, "random seed of the frame sampling")
     cameras: bool = option(False, "learn a small correction (rotation, translation) of each fixed "
                            "interaction camera (--no-cameras: take them as registered)")

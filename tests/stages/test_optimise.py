@@ -391,3 +391,67 @@ def test_depth_refinement_sets_the_last_decimals(cabinet):
         assert s.axis_error_deg < 0.75, s
         if s.origin_error_cm is not None:
             assert s.origin_error_cm < 1.5, s
+
+
+def _surface_labels(cap: Path, points: np.ndarray, joints) -> np.ndarray:
+    """The true part of each point: the link (of the generator's gt.urdf, closed) whose box
+    surface is nearest (0 = base, k + 1 = ``joints[k]``'s child)."""
+    import yourdfpy
+    from artgs.core.synth.objects import box_distance
+    robot = yourdfpy.URDF.load(str(cap / "gt.urdf"))
+    distance = []
+    for name in ["base"] + [j.child for j in joints]:
+        boxes = [(robot.get_transform(name, "world") @ (np.eye(4) if v.origin is None
+                                                         else v.origin),
+                  np.asarray(v.geometry.box.size) / 2, name)
+                 for v in robot.link_map[name].visuals if v.geometry.box is not None]
+        distance.append(box_distance(points, boxes))
+    return np.argmin(np.stack(distance, 1), 1)
+
+
+def test_depth_votes_give_the_parts_back(cabinet):
+    """The true parts (the generator's link surfaces) are what the frames' depth supports: from
+    them nothing moves. From wrong parts (the door's Gaussians given to the base, the drawer's
+    box grown over the body) the door gets its Gaussians back and the base its own, and
+    :func:`reassign` keeps the change, since the image loss falls."""
+    from artgs.core.geometry.parts import assign_parts
+    from artgs.core.stages.optimise.assign import reassign, voted_labels
+    from artgs.core.stages.optimise.fit import FitConfig, evaluate
+    from artgs.core.stages.optimise.frames import interaction_frames
+    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
+    from artgs.core.stages.optimise.stage import Runner, object_size
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    arrays = initial_splats(capture.static)[0]
+    dev = torch.device("cpu")
+    frames = interaction_frames(capture, dev)
+    truth = _surface_labels(cabinet, arrays.means, gt)
+    cfg = FitConfig()
+
+    def model(labels):
+        m = ArticulatedSplat(Splat.from_arrays(arrays, dev), gt, frames.times, labels,
+                             object_size(arrays.means), [False] * len(gt))
+        m.hard = torch.as_tensor(labels)
+        return m
+
+    assert (voted_labels(model(truth), frames, cfg, [False] * len(gt)) != truth).mean() < 0.01
+    grown = copy.deepcopy(gt)
+    d = next(k for k, j in enumerate(gt) if j.type == "prismatic")
+    door = 1 + next(k for k, j in enumerate(gt) if j.type == "revolute")
+    grown[d].extent = dict(gt[d].extent, half_size=[1.3 * h for h in gt[d].extent["half_size"]])
+    wrong = assign_parts(arrays.means, grown)
+    wrong[wrong == door] = 0
+    m = model(wrong)
+    voted = voted_labels(m, frames, cfg, [False] * len(gt))
+
+    def iou(labels, k):
+        return ((labels == k) & (truth == k)).sum() / ((labels == k) | (truth == k)).sum()
+
+    assert iou(wrong, door) == 0 and iou(voted, door) > 0.5
+    assert iou(voted, 0) > iou(wrong, 0) + 0.1
+    before = float(evaluate(m, frames, cfg).mean())
+    run = Runner(m, frames, cfg, QUIET, OptimiseOptions(), torch.zeros(len(gt)))
+    moved = reassign(run, 10, 0.1, [False] * len(gt))
+    assert moved and (m.labels() != wrong).sum() > 100
+    assert float(evaluate(m, frames, cfg).mean()) < before

@@ -33,7 +33,7 @@ def _colour(v: View) -> torch.Tensor:
     return v.rgb if v.rgb_full is None else v.rgb_full
 
 
-def _region(v: View) -> torch.Tensor:
+def region_of(v: View) -> torch.Tensor:
     """The object's pixels, as wide as the mask may be."""
     return (v.mask if v.mask_offsets is None else v.mask_offsets[-1]) > 0.5
 
@@ -49,7 +49,7 @@ def _differences(a: View, b: View, da: torch.Tensor, db: torch.Tensor
                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Colour and depth differences of two frames of one camera, and the object region where
     they count (either frame's object, nothing known in front: an arm, a hand)."""
-    region = _region(a) | _region(b)
+    region = region_of(a) | region_of(b)
     for v in (a, b):
         if v.occluder_depth is not None:
             region &= v.occluder_depth <= 0

@@ -261,6 +261,14 @@ class ArticulatedSplat:
                 h[m] = label
                 self.hard = h
 
+    def reassign_all(self, labels: np.ndarray) -> None:
+        """Make ``labels`` (N,) the hard assignment (and the logits' argmax)."""
+        h = torch.as_tensor(labels, device=self.logits.device)
+        with torch.no_grad():
+            self.logits = torch.zeros_like(self.logits)
+            self.logits[torch.arange(self.splat.n, device=h.device), h] = HARD_LOGIT
+        self.hard = h.clone()
+
     def drop(self, k: int) -> None:
         """Remove joint ``k``; its Gaussians join the base."""
         keep = [i for i in range(self.k) if i != k]

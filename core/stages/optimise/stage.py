@@ -13,7 +13,9 @@ Steps (each fit is :func:`.fit.fit`):
 2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
 3. type by evidence, then spurious parts (:mod:`.hypotheses`);
 4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
-   missed parts where the frames change and the model does not (:func:`.missed.add_missed`),
+   each Gaussian to the part the frames' depth supports, kept if it lowers the loss
+   (:mod:`.assign`); missed parts where the frames change and the model does not
+   (:func:`.missed.add_missed`),
    then, if any was added, step 4's fits again (at half length) and the spurious-part test;
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
    each joint refined last on the frames' depth (:mod:`.depth_fit`);
@@ -120,7 +122,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
              options: OptimiseOptions | None = None,
              config: FitConfig | None = None) -> dict[str, Any]:
     """Optimise the proposals of ``out`` against ``capture``; writes the outputs (module doc)."""
-    from . import hypotheses, missed, seen
+    from . import assign, hypotheses, missed, seen
 
     options = options or OptimiseOptions()
     cfg = config or FitConfig()
@@ -173,7 +175,9 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
     if options.parts and model.k:
         removed = hypotheses.remove_spurious(run, locked=model.locked.tolist())
     run.done = 0.6
-    refine(run, n, share=0.28)
+    refine(run, n, share=0.24)
+    assigned = assign.reassign(run, max(n // 4, 1), 0.04, model.locked.tolist()) \
+        if options.assign and model.k else {}
     added: list[str] = []
     if options.parts:
         added = missed.add_missed(run, share=0.05)
@@ -201,7 +205,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                                          "loss": float(losses.mean()), "removed": removed,
                                          "added": added})
     figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
-               "trimmed": trimmed,
+               "trimmed": trimmed, "assigned": assigned,
                "cameras": camera_corrections(model),
                "kept_start": kept_start, "added": added, "depth": depth,
                "types": [j.type for j in result],
