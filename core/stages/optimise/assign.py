@@ -33,6 +33,7 @@ from .changes import region_of
 from .fit import evaluate
 from .kinematics import joint_motions
 from .model import ArticulatedSplat, restore, snapshot
+from .seen import project
 
 #: Colour difference (x the loss's colour scale) within which a frame's pixel supports a Gaussian.
 COLOUR = 2.0
@@ -62,12 +63,7 @@ def depth_votes(model: ArticulatedSplat, frames, cfg) -> tuple[torch.Tensor, tor
                                 model.values(ti))
         for label in range(model.k + 1):
             p = means if label == 0 else means @ R[label - 1].T + t[label - 1]
-            cam = p @ v.w2c[:3, :3].T + v.w2c[:3, 3]
-            z = cam[:, 2]
-            uv = cam[:, :2] / z.clamp_min(1e-6)[:, None] * v.K[[0, 1], [0, 1]] + v.K[:2, 2]
-            px, py = uv[:, 0].floor().long(), uv[:, 1].floor().long()
-            seen = (z > 0) & (px >= 0) & (py >= 0) & (px < v.width) & (py < v.height)
-            py, px = py.clamp(0, v.height - 1), px.clamp(0, v.width - 1)
+            (px, py), z, seen = project(v, p)
             d = v.depth[py, px]
             ok = seen & (d > 0)
             alike = (colour - rgb[py, px]).abs().mean(-1) < COLOUR * cfg.sigma_rgb

@@ -28,7 +28,7 @@ def seen_static(model: ArticulatedSplat, frames, cfg, k: int, pixels: float = 2.
     still = torch.zeros(model.splat.n, dtype=torch.long, device=means.device)
     moved = torch.zeros(model.splat.n, dtype=torch.bool, device=means.device)
     for ti, v, _, change, (px, py), front, _ in closed_views(model, frames, cfg):
-        (qx, qy), _, _ = _project(v, model.posed(ti)[0])
+        (qx, qy), _, _ = project(v, model.posed(ti)[0])
         shift = ((qx - px) ** 2 + (qy - py) ** 2).float().sqrt() >= pixels
         here = change[py, px]
         still += (part & front & shift & ~here).long()
@@ -55,13 +55,13 @@ def closed_views(model: ArticulatedSplat, frames, cfg):
         if cam not in closed:
             closed[cam] = model.render(v, frames.times.index(0), cfg.backend)
         r0 = closed[cam]
-        (px, py), z, inside = _project(v, means)
+        (px, py), z, inside = project(v, means)
         gap = z - r0.depth[py, px]
         band = max(tol, 3 * layer_spread(gap[inside & (gap < 0)])) + surface_slope(r0.depth)
         yield ti, v, r0, changed[i], (px, py), inside & (gap.abs() < band[py, px]), \
             inside & (gap.abs() < tol)
 
-def _project(v, pts: torch.Tensor) -> tuple[tuple[torch.Tensor, torch.Tensor], torch.Tensor,
+def project(v, pts: torch.Tensor) -> tuple[tuple[torch.Tensor, torch.Tensor], torch.Tensor,
                                             torch.Tensor]:
     """Pixel (column, row) of world points in view ``v`` (clamped into the image), their depth,
     and whether they fall inside the image in front of the camera."""
