@@ -91,10 +91,11 @@ def voted_labels(model: ArticulatedSplat, frames, cfg, locked: list[bool]) -> np
     return torch.where(allowed.any(1) & ~fixed, best, current).cpu().numpy()
 
 
-def reassign(run, steps: int, share: float, locked: list[bool]) -> dict[str, int]:
+def reassign(run, steps: int, share: float, locked: list[bool],
+             free: list[bool] | None = None) -> dict[str, list[int]]:
     """Give each Gaussian to the part its depth supports (:func:`voted_labels`) and refit the
-    joints for ``steps`` steps; kept when the image loss over all frames is then lower than
-    before, else everything is restored. Returns per part the Gaussians it gained and lost
+    joints (those in ``free``, default all) for ``steps`` steps; kept when the image loss over
+    all frames is then lower than before, else everything (labels and logits too) is restored. Returns per part the Gaussians it gained and lost
     (``{name: [gained, lost]}``), empty when nothing changed or the change was not kept.
     The model must be hardened."""
     model, frames, cfg = run.model, run.frames, run.cfg
@@ -104,16 +105,16 @@ def reassign(run, steps: int, share: float, locked: list[bool]) -> dict[str, int
         run.done += share
         return {}
     loss0 = float(evaluate(model, frames, cfg).mean())
-    snap, hard = snapshot(model), model.hard.clone()
+    snap, hard, logits = snapshot(model), model.hard.clone(), model.logits.clone()
     model.reassign_all(after)
-    run.run_fit(steps, "parts by depth", share, lr_scale=0.1)
+    run.run_fit(steps, "parts by depth", share, lr_scale=0.1, free=free)
     loss1 = float(evaluate(model, frames, cfg).mean())
     moved = {name: [int(((after == k + 1) & (before != k + 1)).sum()),
                     int(((before == k + 1) & (after != k + 1)).sum())]
              for k, name in enumerate(model.names)}
     if loss1 >= loss0:
         restore(model, snap)
-        model.reassign_all(hard.cpu().numpy())
+        model.hard, model.logits = hard, logits
         run.progress.log(f"parts by depth: not kept (image loss {loss0:.5f} -> {loss1:.5f})")
         return {}
     run.progress.log("parts by depth: " + ", ".join(f"{n} +{g}/-{lo}" for n, (g, lo)
