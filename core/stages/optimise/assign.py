@@ -91,10 +91,9 @@ def voted_labels(model: ArticulatedSplat, frames, cfg, locked: list[bool]) -> np
     return torch.where(allowed.any(1) & ~fixed, best, current).cpu().numpy()
 
 
-def reassign(run, steps: int, share: float, locked: list[bool],
-             free: list[bool] | None = None) -> dict[str, list[int]]:
+def reassign(run, steps: int, share: float, locked: list[bool]) -> dict[str, list[int]]:
     """Give each Gaussian to the part its depth supports (:func:`voted_labels`) and refit the
-    joints (those in ``free``, default all) for ``steps`` steps; kept when the image loss over
+    joints for ``steps`` steps; kept when the image loss over
     all frames is then lower than before, else everything (labels and logits too) is restored. Returns per part the Gaussians it gained and lost
     (``{name: [gained, lost]}``), empty when nothing changed or the change was not kept.
     The model must be hardened."""
@@ -107,7 +106,7 @@ def reassign(run, steps: int, share: float, locked: list[bool],
     loss0 = float(evaluate(model, frames, cfg).mean())
     snap, hard, logits = snapshot(model), model.hard.clone(), model.logits.clone()
     model.reassign_all(after)
-    run.run_fit(steps, "parts by depth", share, lr_scale=0.1, free=free)
+    run.run_fit(steps, "parts by depth", share, lr_scale=0.1)
     loss1 = float(evaluate(model, frames, cfg).mean())
     moved = {name: [int(((after == k + 1) & (before != k + 1)).sum()),
                     int(((before == k + 1) & (after != k + 1)).sum())]

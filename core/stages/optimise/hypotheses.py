@@ -278,20 +278,15 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
     (states searched at every time, coarse-to-fine with only this joint free), and so is the
     best of the joint's own type when it scores better than the joint itself (a hinge proposed
     on the wrong edge); the fit with the lowest image loss over the frames where the part moves
-    is kept. With ``options.assign`` every hypothesis, the joint's own included, is judged with
-    the part the frames' depth gives it (:func:`own_parts`), and the kept one keeps that part.
-    Returns per joint the evidence: each type's loss, the kept type, the relative
+    is kept. Returns per joint the evidence: each type's loss, the kept type, the relative
     margin between the types and whether a restart of its own type was kept.
     """
     model, frames, cfg = run.model, run.frames, run.cfg
     evidence: dict[str, dict[str, Any]] = {}
     todo = [k for k in range(model.k) if not fixed[k]]
     steps = max(run.options.iterations // 2, 1)
-    vote = run.options.assign and model.hard is not None
     for k in todo:
         name = model.names[k]
-        if vote:   # this joint's own part first, as every hypothesis's below
-            own_parts(run, k, steps)
         ids = moving_frames(model, frames, k)
         own = model.types[k]
         other = PRISMATIC if own == REVOLUTE else REVOLUTE
@@ -302,7 +297,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
         if not ids or not hyps[other]:
             run.done += share / len(todo)
             continue
-        kept, kept_parts = snapshot(model), parts_of(model)
+        kept = snapshot(model)
         here = float(evaluate(model, frames, cfg, 0, ids).mean())
         key = key_time(model, frames, cfg, k)
         unit = model.unit_of(own)
@@ -321,7 +316,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
                     best[kind] = (loss, axis, point)
                 restore(model, kept)
                 run.progress.check_cancel()
-        fitted = [(here, kept, False, kept_parts)]
+        fitted = [(here, kept, False)]
         losses = {own: here}
         for kind in (other, own):
             if kind not in best or (kind == own and best[kind][0] >= current):
@@ -333,16 +328,12 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
             run.run_fit(steps, label, share / len(todo) / 2,
                         free=[i == k for i in range(model.k)], coarse=cfg.coarse,
                         coarse_level=part_level(model, frames, k))
-            if vote:
-                own_parts(run, k, steps)
             there = float(evaluate(model, frames, cfg, 0, ids).mean())
-            fitted.append((there, snapshot(model), kind == own, parts_of(model)))
+            fitted.append((there, snapshot(model), kind == own))
             losses[kind] = min(losses.get(kind, np.inf), there)
             restore(model, kept)
-            set_parts(model, kept_parts)
-        _, snap, restarted, parts = min(fitted, key=lambda f: f[0])
+        _, snap, restarted = min(fitted, key=lambda f: f[0])
         restore(model, snap)
-        set_parts(model, parts)
         kind = model.types[k]
         lo, hi = min(losses.values()), max(losses.values())
         margin = (hi - lo) / max(lo, 1e-12)
@@ -352,27 +343,6 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
                          " (image loss " + ", ".join(f"{v:.4f} {t}" for t, v in losses.items())
                          + ")")
     return evidence
-
-def own_parts(run, k: int, steps: int) -> None:
-    """Joint ``k``'s part by the frames' depth under its current hypothesis
-    (:func:`.assign.reassign` between the base and this part, only this joint refitted, for a
-    quarter of ``steps``): a hypothesis is judged with the part its motion explains, not with
-    the part another hypothesis was drawn on."""
-    from .assign import reassign
-    n = run.model.k
-    reassign(run, max(steps // 4, 1), 0.0, locked=[i != k for i in range(n)],
-             free=[i == k for i in range(n)])
-
-
-def parts_of(model: ArticulatedSplat) -> tuple:
-    """The model's part assignment (hard labels, logits), copies, for :func:`set_parts`."""
-    return (None if model.hard is None else model.hard.clone()), model.logits.clone()
-
-
-def set_parts(model: ArticulatedSplat, parts: tuple) -> None:
-    """Take back a part assignment of :func:`parts_of`."""
-    model.hard, model.logits = parts
-
 
 def remove_spurious(run, locked: list[bool]) -> list[str]:
     """Remove the joints whose motion does not clearly explain the frames where the part moves
