@@ -18,8 +18,9 @@ Counted over the interaction frames, a Gaussian leaves its part only where at le
 more frames see through it there than through it placed by another part (one frame may be a
 flying pixel); of those parts it joins the one with the most support less contradiction. Being
 hidden is no evidence, and support alone is not either (a surface that happens to lie where a
-wrong part puts a Gaussian supports it): Gaussians the frames do not contradict stay. The change is kept only when, refitted, it lowers the
-image loss over all frames (:func:`reassign`).
+wrong part puts a Gaussian supports it): Gaussians the frames do not contradict stay. The
+change is kept only when, refitted, it lowers the image loss over all frames
+(:func:`reassign`).
 """
 
 from __future__ import annotations
