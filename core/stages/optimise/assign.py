@@ -94,10 +94,10 @@ def voted_labels(model: ArticulatedSplat, frames, cfg, locked: list[bool]) -> np
 
 def reassign(run, steps: int, share: float, locked: list[bool]) -> dict[str, list[int]]:
     """Give each Gaussian to the part its depth supports (:func:`voted_labels`) and refit the
-    joints for ``steps`` steps; kept when the image loss over
-    all frames is then lower than before, else everything (labels and logits too) is restored. Returns per part the Gaussians it gained and lost
-    (``{name: [gained, lost]}``), empty when nothing changed or the change was not kept.
-    The model must be hardened."""
+    joints for ``steps`` steps; kept when the image loss over all frames is then lower than
+    before, else everything (labels and logits too) is restored. Returns per part the Gaussians
+    it gained and lost (``{name: [gained, lost]}``), empty when nothing changed or the change
+    was not kept. The model must be hardened."""
     model, frames, cfg = run.model, run.frames, run.cfg
     before = model.labels()
     after = voted_labels(model, frames, cfg, locked)
