@@ -21,6 +21,17 @@ from ...geometry.consistency import depth_views, seen_behind
 from ...model.capture import Frame
 from ...model.joints import joint_transform
 
+#: motion below which the frames show a part barely moving: 10 degrees, or 5 % of the object's
+#: size (weak evidence in the report; a part the optimisation invents must move more)
+LITTLE_TURN = np.radians(10.0)
+LITTLE_SLIDE = 0.05
+
+
+def little_motion(kind: str, span: float, size: float) -> bool:
+    """Whether a ``kind`` joint's observed range ``span`` (rad / m) is barely any motion."""
+    return span < (LITTLE_TURN if kind == "revolute" else LITTLE_SLIDE * size)
+
+
 #: share of a part's moved surface hidden behind measured surfaces above which a motion is
 #: reported as going into the body (more of it goes in than stays out)
 HIDDEN_SHARE = 0.5

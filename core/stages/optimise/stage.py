@@ -47,7 +47,7 @@ from .fit import FitConfig, evaluate, fit, search_states
 from .frames import FrameSet, interaction_frames
 from ..robot_twin import tool_path
 from .occluders import known_occluders
-from .plausible import HIDDEN_SHARE, OpenSpace, into_body, open_space
+from .plausible import HIDDEN_SHARE, OpenSpace, into_body, little_motion, open_space
 from .model import ArticulatedSplat, Splat
 from .kinematics import REVOLUTE
 
@@ -282,8 +282,7 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
         residual = float(losses[moving].mean()) if moving else float(losses.mean())
         ev = evidence.get(name, {})
         warnings = []
-        span = (hi - lo) * (1.0 if kind == REVOLUTE else 1.0 / (0.05 * model.size))
-        if span < math.radians(10):
+        if little_motion(kind, hi - lo, model.size):
             warnings.append("little motion seen")
         if len(pts) < 50:
             warnings.append("part has few Gaussians")
