@@ -92,17 +92,6 @@ def voted_labels(model: ArticulatedSplat, frames, cfg, locked: list[bool]) -> np
     return torch.where(allowed.any(1) & ~fixed, best, current).cpu().numpy()
 
 
-def depth_prefers_moving(model: ArticulatedSplat, frames, cfg, k: int) -> tuple[int, int]:
-    """Of part ``k``'s Gaussians, how many the frames' depth prefers moved by its joint and how
-    many it prefers at rest (contradicted at least ``MARGIN`` frames less there than in the
-    other place: module doc). A part the optimisation invents to fill pixels no model explains
-    (an inside the closed splat lacks) moves Gaussians where the frames see through them."""
-    part = torch.as_tensor(model.labels() == k + 1, device=model.splat.means.device)
-    _, against = depth_votes(model, frames, cfg)
-    moving, rest = against[part, k + 1], against[part, 0]
-    return int((moving <= rest - MARGIN).sum()), int((rest <= moving - MARGIN).sum())
-
-
 def reassign(run, steps: int, share: float, locked: list[bool]) -> dict[str, list[int]]:
     """Give each Gaussian to the part its depth supports (:func:`voted_labels`) and refit the
     joints for ``steps`` steps; kept when the image loss over all frames is then lower than

@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .assign import depth_prefers_moving
 from .fit import evaluate, part_level, search_states
 from .hypotheses import (REMOVE_TOL, box_edges, clearly_better, key_time, part_normal,
                          part_points, score_at, state_candidates)
@@ -55,10 +54,9 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     hypothesis: hinges at its box edges and slides
     along its normal and box axes are scored by rendering at its key time, the best is fitted,
     and the part is kept only if it clearly lowers the image loss of the frames where it moves
-    (:func:`clearly_better`), moves visibly (not :func:`.plausible.little_motion`: a part that
-    turns half the object by half a degree absorbs small registration errors, it is not a part)
-    and, with ``options.assign``, the frames' depth prefers more of its Gaussians moved than at
-    rest (:func:`.assign.depth_prefers_moving`). A kept part explains
+    (:func:`clearly_better`) and moves visibly (not :func:`.plausible.little_motion`: a part
+    that turns half the object by half a degree absorbs small registration errors, it is not a
+    part). A kept part explains
     its changes (and those of what it hid), so the changes are found again before the next of
     at most ``tries`` parts. Returns the names of the added joints."""
     model, frames, cfg = run.model, run.frames, run.cfg
@@ -120,13 +118,6 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             unit = "rad" if model.types[k] == REVOLUTE else "m"
             run.progress.log(f"{name}: not added, it barely moves ({span:.3f} {unit}): an "
                              f"invented part must move visibly")
-        elif gain and run.options.assign:
-            moving, rest = depth_prefers_moving(model, frames, cfg, k)
-            if rest > moving:
-                gain = False
-                run.progress.log(f"{name}: not added, the frames' depth sees through its "
-                                 f"Gaussians moved ({rest} of them prefer rest, {moving} "
-                                 f"the motion)")
         if not gain:
             model.drop(k)
             run.trust = run.trust[:-1]
