@@ -27,6 +27,12 @@ def sh_degree(num_coeffs: int) -> int:
     return degree
 
 
+def sh0_to_rgb(sh0):
+    """Colour of DC coefficients ``sh0`` (tensor or array, (..., 3)), before clamping: the
+    view-independent part of a Gaussian's colour."""
+    return C0 * sh0 + 0.5
+
+
 def rgb_to_sh0(rgb: torch.Tensor) -> torch.Tensor:
     """DC coefficient giving colour ``rgb`` (inverse of the degree-0 evaluation)."""
     return (rgb - 0.5) / C0

@@ -34,7 +34,7 @@ from ...model.cameras import Camera, intrinsics, look_at
 from ...model.ply import SplatArrays
 from ...render.gaussians import Gaussians
 from ...render.rasterize import render
-from ...render.sh import C0
+from ...render.sh import sh0_to_rgb
 
 
 TRUNC_VOXELS = 2.5      # TSDF truncation, in voxels
@@ -63,7 +63,7 @@ def fibonacci_directions(n: int) -> np.ndarray:
 
 def splat_colors(splat: SplatArrays) -> np.ndarray:
     """View-independent RGB (N, 3) in 0..1 of each Gaussian (its SH DC term)."""
-    return np.clip(C0 * splat.sh[:, 0] + 0.5, 0.0, 1.0)
+    return np.clip(sh0_to_rgb(splat.sh[:, 0]), 0.0, 1.0)
 
 
 def opaque(splat: SplatArrays, min_opacity: float = 0.1) -> np.ndarray:

@@ -29,8 +29,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ...render.sh import C0
-from .changes import region_of
+from ...render.sh import sh0_to_rgb
+from .changes import colour_of, region_of
 from .fit import evaluate
 from .kinematics import joint_motions
 from .model import ArticulatedSplat, restore, snapshot
@@ -50,13 +50,13 @@ def depth_votes(model: ArticulatedSplat, frames, cfg) -> tuple[torch.Tensor, tor
     support = torch.zeros(model.splat.n, model.k + 1, device=means.device)
     against = torch.zeros_like(support)
     base = cfg.sigma_depth * 0.01 * model.size
-    colour = (0.5 + C0 * model.splat.sh[:, 0]).clamp(0, 1)
+    colour = sh0_to_rgb(model.splat.sh[:, 0]).clamp(0, 1)
     for i, ti in enumerate(frames.time_index):
         if frames.times[ti] == 0:
             continue
         v = frames.levels[0][i]
         tol = max(base, cfg.noise_sigmas * v.depth_noise)
-        rgb = v.rgb if v.rgb_full is None else v.rgb_full
+        rgb = colour_of(v)
         outline = region_of(v)
         nearest = -F.max_pool2d(-torch.where(v.depth > 0, v.depth, torch.inf)[None, None], 3, 1,
                                 1)[0, 0]

@@ -29,7 +29,7 @@ def median3(depth: torch.Tensor) -> torch.Tensor:
     return torch.where(valid.sum(0) >= 5, torch.nan_to_num(med), torch.zeros_like(med)).view(h, w)
 
 
-def _colour(v: View) -> torch.Tensor:
+def colour_of(v: View) -> torch.Tensor:
     return v.rgb if v.rgb_full is None else v.rgb_full
 
 
@@ -40,7 +40,7 @@ def region_of(v: View) -> torch.Tensor:
 
 def _gain(a: View, b: View, region: torch.Tensor) -> torch.Tensor:
     """Exposure of ``a`` relative to ``b``: median brightness ratio over ``region``."""
-    x, y = _colour(a).mean(-1), _colour(b).mean(-1)
+    x, y = colour_of(a).mean(-1), colour_of(b).mean(-1)
     ok = region & (x > 0.02) & (y > 0.05)
     return (x[ok] / y[ok]).median() if int(ok.sum()) >= 16 else torch.ones(())
 
@@ -53,7 +53,7 @@ def _differences(a: View, b: View, da: torch.Tensor, db: torch.Tensor
     for v in (a, b):
         if v.occluder_depth is not None:
             region &= v.occluder_depth <= 0
-    colour = (_colour(a) / _gain(a, b, region) - _colour(b)).abs().mean(-1)
+    colour = (colour_of(a) / _gain(a, b, region) - colour_of(b)).abs().mean(-1)
     both = (da > 0) & (db > 0)
     depth = torch.where(both, (da - db).abs(), torch.zeros_like(da))
     return colour, depth, region

@@ -25,6 +25,13 @@ from .kinematics import (PRISMATIC, REVOLUTE, joint_motions, quat_multiply, skew
 HARD_LOGIT = 8.0    # logit of a hardened / box-assigned part (weight ~0.999 with 2 parts)
 
 
+def hard_logits(labels: torch.Tensor, parts: int) -> torch.Tensor:
+    """Skinning logits (N, ``parts``) that put each Gaussian in its part of ``labels`` (N,)."""
+    logits = torch.zeros(len(labels), parts, dtype=torch.float32, device=labels.device)
+    logits[torch.arange(len(labels), device=labels.device), labels] = HARD_LOGIT
+    return logits
+
+
 @dataclass
 class Splat:
     """The fixed canonical Gaussians as tensors."""
@@ -82,8 +89,7 @@ class ArticulatedSplat:
                 if j.states and t in j.states:
                     self.states[k, ti] = j.states[t] / self.unit_of(j.type)
         self.moving = torch.tensor([t != 0 for t in times], **f)
-        self.logits = torch.zeros(splat.n, K + 1, **f)
-        self.logits[torch.arange(splat.n), torch.as_tensor(labels, device=dev)] = HARD_LOGIT
+        self.logits = hard_logits(torch.as_tensor(labels, device=dev), K + 1)
         self.hard: torch.Tensor | None = None
         # per fixed interaction camera: a correction (rotation vector, translation in object
         # sizes) in the camera's frame, learnt when ``refine_cameras`` (:func:`camera_motion`)
@@ -264,9 +270,7 @@ class ArticulatedSplat:
     def reassign_all(self, labels: np.ndarray) -> None:
         """Make ``labels`` (N,) the hard assignment (and the logits' argmax)."""
         h = torch.as_tensor(labels, device=self.logits.device)
-        with torch.no_grad():
-            self.logits = torch.zeros_like(self.logits)
-            self.logits[torch.arange(self.splat.n, device=h.device), h] = HARD_LOGIT
+        self.logits = hard_logits(h, self.k + 1)
         self.hard = h.clone()
 
     def drop(self, k: int) -> None:
