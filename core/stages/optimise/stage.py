@@ -16,7 +16,9 @@ Steps (each fit is :func:`.fit.fit`):
    each Gaussian to the part the frames' depth supports, kept if it lowers the loss
    (:mod:`.assign`); missed parts where the frames change and the model does not
    (:func:`.missed.add_missed`),
-   then, if any was added, step 4's fits again (at half length) and the spurious-part test;
+   then, if any was added, its type by evidence, step 4's fits again (at half length), the
+   parts by the depth again (a new part holds only the Gaussians seen changing) and the
+   spurious-part test;
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
    each joint refined last on the frames' depth (:mod:`.depth_fit`);
 5. report per joint residual, observed range and confidence.
@@ -186,6 +188,11 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                                                 fixed=[name not in added for name in model.names]))
     if added:                     # the new parts refined with the others, then tested again
         refine(run, n // 2, share=0.07)
+        if options.assign:        # a new part is what the frames saw change: give it the rest
+            for name, (gain, loss) in assign.reassign(run, max(n // 4, 1), 0.0,
+                                                      model.locked.tolist()).items():
+                g0, l0 = assigned.get(name, [0, 0])
+                assigned[name] = [g0 + gain, l0 + loss]
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
         removed += [name for name in again if name not in added]
         added = [name for name in added if name not in again]
