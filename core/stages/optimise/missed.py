@@ -29,6 +29,22 @@ def typical_motion(model: ArticulatedSplat, k: int) -> float:
     moved = np.linalg.norm(posed_part(model, k, pts) - pts[None], axis=-1).max(0)
     return float(np.median(moved))
 
+def drop_still(run, names: list[str]) -> list[str]:
+    """Remove the joints ``names`` (parts the search added) that no longer move visibly after
+    the refits (:func:`typical_motion` under ``MOVES_VISIBLY`` of the object's size): a part
+    that absorbs misfits can start moving and settle still. Returns the names removed."""
+    model = run.model
+    dropped = []
+    for name in names:
+        k = model.names.index(name)
+        shift = typical_motion(model, k)
+        if shift < MOVES_VISIBLY * model.size:
+            run.progress.log(f"{name}: removed, it barely moves after the refits (its Gaussians "
+                             f"by {100 * shift:.1f} cm)")
+            run.drop(k)
+            dropped.append(name)
+    return dropped
+
 def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
     """Connected groups of ``points`` (neighbours closer than 3 median neighbour distances),
     largest first, each of at least ``min_size`` points; index arrays."""
@@ -131,8 +147,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             run.progress.log(f"{name}: not added, it barely moves (its Gaussians by "
                              f"{100 * shift:.1f} cm): an invented part must move visibly")
         if not gain:
-            model.drop(k)
-            run.trust = run.trust[:-1]
+            run.drop(k)
             restore(model, kept)
             break
         into = merge_target(model, frames, cfg, k, after)
@@ -142,8 +157,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         run.progress.log(f"{name}: moves with {model.names[into]}; merged into its part")
         fitted = snapshot(model)
         model.reassign(model.labels() == k + 1, into + 1)
-        model.drop(k)
-        run.trust = run.trust[:-1]
+        run.drop(k)
         restore(model, (fitted[0][:-1], fitted[1][:-1], fitted[2][:-1], fitted[3][:-1]))
     return added
 
