@@ -368,7 +368,8 @@ def remove_spurious(run, locked: list[bool]) -> list[str]:
                              f"{rest[ids].mean() if ids else rest.mean():.4f} where it moves, "
                              f"moving {here[ids].mean() if ids else here.mean():.4f})")
             removed.append(model.names[k])
-            run.drop(k)
+            model.drop(k)
+            run.trust = torch.cat([run.trust[:k], run.trust[k + 1:]])
             locked = locked[:k] + locked[k + 1:]
         else:
             k += 1

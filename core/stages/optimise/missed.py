@@ -8,42 +8,12 @@ import torch
 
 from .fit import evaluate, part_level, search_states
 from .hypotheses import (REMOVE_TOL, box_edges, clearly_better, key_time, part_normal,
-                         part_points, posed_part, score_at, state_candidates)
+                         part_points, score_at, state_candidates)
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
+from .plausible import little_motion
 from .seen import unexplained
 
-#: Share of the object's size by which the median Gaussian of a part the optimisation invents
-#: must move: a part that turns half the object by half a degree (0.4 %) absorbs small
-#: registration errors, it is not a part; a door opened 10 degrees or a drawer pulled 3 cm, the
-#: least a capture opens a part, moves its Gaussians by 2-4 % of the object's size.
-MOVES_VISIBLY = 0.01
-
-
-def typical_motion(model: ArticulatedSplat, k: int) -> float:
-    """How far joint ``k`` moves its part (m): per Gaussian the largest displacement over the
-    times, the median over the part (of an even subsample); 0 for an empty part."""
-    pts = part_points(model, k)
-    if not len(pts):
-        return 0.0
-    moved = np.linalg.norm(posed_part(model, k, pts) - pts[None], axis=-1).max(0)
-    return float(np.median(moved))
-
-def drop_still(run, names: list[str]) -> list[str]:
-    """Remove the joints ``names`` (parts the search added) that no longer move visibly after
-    the refits (:func:`typical_motion` under ``MOVES_VISIBLY`` of the object's size): a part
-    that absorbs misfits can start moving and settle still. Returns the names removed."""
-    model = run.model
-    dropped = []
-    for name in names:
-        k = model.names.index(name)
-        shift = typical_motion(model, k)
-        if shift < MOVES_VISIBLY * model.size:
-            run.progress.log(f"{name}: removed, it barely moves after the refits (its Gaussians "
-                             f"by {100 * shift:.1f} cm)")
-            run.drop(k)
-            dropped.append(name)
-    return dropped
 
 def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
     """Connected groups of ``points`` (neighbours closer than 3 median neighbour distances),
@@ -84,8 +54,9 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     hypothesis: hinges at its box edges and slides
     along its normal and box axes are scored by rendering at its key time, the best is fitted,
     and the part is kept only if it clearly lowers the image loss of the frames where it moves
-    (:func:`clearly_better`) and moves visibly (:func:`typical_motion` at least
-    ``MOVES_VISIBLY`` of the object's size). A kept part explains
+    (:func:`clearly_better`) and moves visibly (not :func:`.plausible.little_motion`: a part
+    that turns half the object by half a degree absorbs small registration errors, it is not a
+    part). A kept part explains
     its changes (and those of what it hid), so the changes are found again before the next of
     at most ``tries`` parts. Returns the names of the added joints."""
     model, frames, cfg = run.model, run.frames, run.cfg
@@ -141,13 +112,15 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         run.progress.log(f"{name}: {len(g)} Gaussians where the frames change and the model "
                          f"does not; as a {kind} part the image loss is {after:.5f} "
                          f"(without {before:.5f})")
-        shift = typical_motion(model, k)
-        if gain and shift < MOVES_VISIBLY * model.size:
+        span = float(np.ptp([0.0, *model.joint_values(k).values()]))
+        if gain and little_motion(model.types[k], span, model.size):
             gain = False
-            run.progress.log(f"{name}: not added, it barely moves (its Gaussians by "
-                             f"{100 * shift:.1f} cm): an invented part must move visibly")
+            unit = "rad" if model.types[k] == REVOLUTE else "m"
+            run.progress.log(f"{name}: not added, it barely moves ({span:.3f} {unit}): an "
+                             f"invented part must move visibly")
         if not gain:
-            run.drop(k)
+            model.drop(k)
+            run.trust = run.trust[:-1]
             restore(model, kept)
             break
         into = merge_target(model, frames, cfg, k, after)
@@ -157,7 +130,8 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         run.progress.log(f"{name}: moves with {model.names[into]}; merged into its part")
         fitted = snapshot(model)
         model.reassign(model.labels() == k + 1, into + 1)
-        run.drop(k)
+        model.drop(k)
+        run.trust = run.trust[:-1]
         restore(model, (fitted[0][:-1], fitted[1][:-1], fitted[2][:-1], fitted[3][:-1]))
     return added
 

@@ -22,7 +22,7 @@ from ...model.capture import Frame
 from ...model.joints import joint_transform
 
 #: motion below which the frames show a part barely moving: 10 degrees, or 5 % of the object's
-#: size (weak evidence in the report)
+#: size (weak evidence in the report; a part the optimisation invents must move more)
 LITTLE_TURN = np.radians(10.0)
 LITTLE_SLIDE = 0.05
 

@@ -16,9 +16,7 @@ Steps (each fit is :func:`.fit.fit`):
    each Gaussian to the part the frames' depth supports, kept if it lowers the loss
    (:mod:`.assign`); missed parts where the frames change and the model does not
    (:func:`.missed.add_missed`),
-   then, if any was added, its type by evidence, step 4's fits again (at half length), the
-   parts by the depth again (a new part holds only the Gaussians seen changing), the
-   spurious-part test and the visible-motion test of the new parts;
+   then, if any was added, step 4's fits again (at half length) and the spurious-part test;
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
    each joint refined last on the frames' depth (:mod:`.depth_fit`);
 5. report per joint residual, observed range and confidence.
@@ -111,11 +109,6 @@ class Runner:
         self.done += share
         return loss
 
-    def drop(self, k: int) -> None:
-        """Remove joint ``k`` (its part to the base) with its prior weight."""
-        self.model.drop(k)
-        self.trust = torch.cat([self.trust[:k], self.trust[k + 1:]])
-
     def joint_figures(self) -> dict[str, Any]:
         """Current joints (streamed to the add-on so bones can move live)."""
         m = self.model
@@ -193,13 +186,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
                                                 fixed=[name not in added for name in model.names]))
     if added:                     # the new parts refined with the others, then tested again
         refine(run, n // 2, share=0.07)
-        if options.assign:        # a new part is what the frames saw change: give it the rest
-            for name, (gain, loss) in assign.reassign(run, max(n // 4, 1), 0.0,
-                                                      model.locked.tolist()).items():
-                g0, l0 = assigned.get(name, [0, 0])
-                assigned[name] = [g0 + gain, l0 + loss]
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
-        again += missed.drop_still(run, [name for name in added if name not in again])
         removed += [name for name in again if name not in added]
         added = [name for name in added if name not in again]
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
