@@ -77,6 +77,8 @@ def clear_scene() -> None:
 def run_stage(label: str, op, **kwargs) -> None:
     """Run one operator synchronously; exit 1 with the engine's message on failure."""
     t0 = time.perf_counter()
+    if not op.poll():
+        sys.exit(f"error: {label} cannot start: {not_ready()}")
     try:
         result = op(**kwargs)
     except RuntimeError as exc:  # the operator reported an error: the engine's message
@@ -84,6 +86,18 @@ def run_stage(label: str, op, **kwargs) -> None:
     if "FINISHED" not in result:
         sys.exit(f"error: {label} did not finish ({', '.join(result)})")
     print(f"{label}: {time.perf_counter() - t0:.1f} s", flush=True)
+
+
+def not_ready() -> str:
+    """Why an engine operator's poll refuses: the scene's folders and the stages' states (an
+    operator cannot start while another job runs or without a capture and output folder)."""
+    settings = bpy.context.scene.artgs
+    capture = settings.capture_path
+    states = "; ".join(f"{name} {settings.stage(name).text}"
+                       for name in ("capture", "reconstruct", "propose"))
+    return (f"capture folder {capture} (transforms.json "
+            f"{'found' if capture and (capture / 'transforms.json').is_file() else 'MISSING'}), "
+            f"output folder {settings.output_path}; stages: {states}")
 
 
 def contact_sheet(module: str, capture: Path, out: Path, width: int,
