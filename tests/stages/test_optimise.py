@@ -181,6 +181,25 @@ def test_locked_joint_stays_put(cabinet, tmp_path):
     assert np.linalg.norm(d - (d @ door.axis) * door.axis) < 1e-5
 
 
+def test_same_inputs_same_outputs(cabinet, tmp_path):
+    """Two runs on the same splat, proposals and seed write the same bytes (every phase, soft
+    skinning included: its kNN gather's gradient order made runs on 15k-Gaussian splats
+    differ; this small splat showed it too rarely to catch, so this guards the rest), and the
+    stage leaves torch's deterministic mode as it found it."""
+    gt = read_articulation(cabinet / "gt.json")
+    start = [_perturb(j, 10.0, 0.05, seed=3) for j in gt.joints]
+    written = []
+    for run in ("a", "b"):
+        (tmp_path / run).mkdir()
+        out = _out(tmp_path / run, cabinet, start)
+        optimise(out, load_capture(cabinet), QUIET,
+                 OptimiseOptions(iterations=40, types=True, parts=True))
+        written.append({name: (out / name).read_bytes()
+                        for name in (layout.ARTICULATION, layout.PART_LABELS)})
+    assert written[0] == written[1]
+    assert not torch.are_deterministic_algorithms_enabled()
+
+
 def test_cancel_leaves_out_as_before(cabinet, tmp_path):
     gt = read_articulation(cabinet / "gt.json")
     out = _out(tmp_path, cabinet, gt.joints)
