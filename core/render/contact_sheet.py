@@ -23,7 +23,7 @@ from ..model.capture import load_capture
 from ..model.errors import InputError
 from ..model.joints import Joint, read_articulation
 from ..model.ply import SplatArrays, read_ply
-from .sh import C0
+from .sh import rgb_to_sh0
 
 #: Part colours (RGB 0..1): base grey, then one colour per joint.
 BASE_COLOUR = (0.62, 0.62, 0.62)
@@ -62,7 +62,7 @@ def coloured_by_part(splats: SplatArrays, labels: np.ndarray) -> SplatArrays:
     palette = np.array([BASE_COLOUR, *PART_COLOURS], np.float32)
     colours = palette[np.where(labels == 0, 0, (labels - 1) % len(PART_COLOURS) + 1)]
     sh = np.zeros_like(splats.sh)
-    sh[:, 0] = (colours - 0.5) / C0
+    sh[:, 0] = rgb_to_sh0(colours)
     return SplatArrays(splats.means, splats.quats, splats.log_scales, splats.opacity_logits, sh)
 
 

@@ -33,8 +33,9 @@ def sh0_to_rgb(sh0):
     return C0 * sh0 + 0.5
 
 
-def rgb_to_sh0(rgb: torch.Tensor) -> torch.Tensor:
-    """DC coefficient giving colour ``rgb`` (inverse of the degree-0 evaluation)."""
+def rgb_to_sh0(rgb):
+    """DC coefficient giving colour ``rgb`` (tensor or array, (..., 3); inverse of
+    :func:`sh0_to_rgb`)."""
     return (rgb - 0.5) / C0
 
 

@@ -403,9 +403,9 @@ def test_changes_point_at_the_moving_parts(cabinet, tmp_path):
 def test_depth_refinement_sets_the_last_decimals(cabinet):
     """From joints 1.5 degrees and 1 cm off (true types, states and parts), the refinement on the
     frames' depth at least halves each axis error and is kept (the image loss is no worse); the
-drawer's slide is taken square to its front (under 0.1 degrees off). At
-    this test's 64x48 a pixel is ~2 cm, so the hinge line itself stays ~1 cm off; at 160x120 the
-    same start ends 0.003 degrees off for the drawer (README, "Optimisation")."""
+    drawer's slide is taken square to its front (under 0.1 degrees off). At this test's 64x48 a
+    pixel is ~2 cm, so the hinge line itself stays ~1 cm off; at 160x120 the same start ends
+    0.003 degrees off for the drawer (README, "Optimisation")."""
     from artgs.core.geometry.parts import assign_parts
     from artgs.core.stages.optimise.depth_fit import refine_on_depth
     from artgs.core.stages.optimise.fit import FitConfig

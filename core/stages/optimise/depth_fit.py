@@ -40,9 +40,11 @@ from .model import restore, snapshot
 #: size) is another joint, not the last decimals: it must lower the image loss to be kept.
 MAX_TURN = 2.0
 MAX_SHIFT = 0.02
+#: A face's thickness in the splat (x object size): Gaussians this close to a plane lie on it.
+FACE_WIDTH = 0.015
 
 
-def front_face(pts: np.ndarray, axis: np.ndarray, size: float, width: float = 0.015,
+def front_face(pts: np.ndarray, axis: np.ndarray, size: float, width: float = FACE_WIDTH,
                peak: float = 3.0) -> np.ndarray | None:
     """The part's face square to a slide along ``axis``: its Gaussians within ``width`` x the
     object's ``size`` of the most populated level along the axis (a drawer's front, not its
@@ -60,7 +62,7 @@ def front_face(pts: np.ndarray, axis: np.ndarray, size: float, width: float = 0.
 
 
 def in_panel(fit: JointFit, pts: np.ndarray, size: float, max_deg: float,
-             width: float = 0.015) -> JointFit:
+             width: float = FACE_WIDTH) -> JointFit:
     """A hinge lies in the plane of its panel (a door, a lid): when at least half of the part's
     Gaussians lie within ``width`` x the object's ``size`` of their dominant plane and the axis
     is within ``max_deg`` of that plane, the axis is projected into it (the point stays). The
