@@ -237,12 +237,23 @@ def fit_joint(points: np.ndarray, transforms: list[np.ndarray], min_angle_deg: f
     drift turns drawers by a few degrees, but a slide still explains them about as well).
     Positive values open the part: the axis sign makes most values positive.
     """
+    revolute, prismatic = fit_both(points, transforms, weights)
+    if revolute.max_angle_deg >= min_angle_deg and \
+            revolute.rms_prismatic > min_ratio * revolute.rms_revolute:
+        return revolute
+    return prismatic
+
+
+def fit_both(points: np.ndarray, transforms: list[np.ndarray],
+             weights: np.ndarray | None = None) -> tuple[JointFit, JointFit]:
+    """The revolute and the prismatic joint that best explain a part's motions (least squares
+    on the moved points, see :func:`fit_joint`): both models, for a choice by other evidence."""
     X = points
     if len(X) > 400:
         X = X[np.random.default_rng(0).choice(len(X), 400, replace=False)]
     Ys = [apply(T, X) for T in transforms]
     w = np.ones(len(transforms)) if weights is None else np.asarray(weights, float)
-    max_angle = max((rotation_log(T[:3, :3])[1] for T in transforms), default=0.0)
+    max_angle = math.degrees(max((rotation_log(T[:3, :3])[1] for T in transforms), default=0.0))
 
     # prismatic: Y_t = X + d s_t
     m = np.stack([(Y - X).mean(axis=0) for Y in Ys]) * np.sqrt(w)[:, None]
@@ -258,10 +269,8 @@ def fit_joint(points: np.ndarray, transforms: list[np.ndarray], min_angle_deg: f
     if th.sum() < 0:
         a, th = -a, -th
     rms_r = _rms([Y - _rotate(X, a, p, t) for Y, t in zip(Ys, th)], w)
-
-    if math.degrees(max_angle) >= min_angle_deg and rms_p > min_ratio * rms_r:
-        return JointFit("revolute", a, p, th, rms_r, rms_p, math.degrees(max_angle))
-    return JointFit("prismatic", d, X.mean(axis=0), s, rms_r, rms_p, math.degrees(max_angle))
+    return (JointFit("revolute", a, p, th, rms_r, rms_p, max_angle),
+            JointFit("prismatic", d, X.mean(axis=0), s, rms_r, rms_p, max_angle))
 
 
 def _rotate(X: np.ndarray, a: np.ndarray, p: np.ndarray, theta: float) -> np.ndarray:

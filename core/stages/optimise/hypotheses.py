@@ -156,6 +156,20 @@ def hypotheses_of(model: ArticulatedSplat, k: int, kind: str, members: np.ndarra
         hyps.append((REVOLUTE, axis, point, values))
     return hyps
 
+def alternative_of(joint, times: list[int]) -> list[tuple[str, np.ndarray, np.ndarray,
+                                                           np.ndarray | None]]:
+    """The proposal's best joint of the other type (``extra["alternative"]`` of the motion
+    route, where both types are refined on the measured points: ``choose_type`` in
+    core/stages/propose/motion/assemble.py) as a hypothesis, with its values at ``times``;
+    none when the proposal has none."""
+    alt = joint.extra.get("alternative") if joint is not None else None
+    if not alt or alt.get("type") not in (PRISMATIC, REVOLUTE):
+        return []
+    states = alt.get("states") or {}
+    values = np.array([float(states.get(str(t), 0.0)) for t in times]) if states else None
+    axis = np.asarray(alt["axis"], float)
+    return [(alt["type"], axis / np.linalg.norm(axis), np.asarray(alt["origin"], float), values)]
+
 def tool_hypotheses(model: ArticulatedSplat, frames, k: int
                     ) -> list[tuple[str, np.ndarray, np.ndarray, None]]:
     """Joints from the robot's tool path (``frames.tool``, time -> world <- tool pose), when the
@@ -272,8 +286,8 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
     """Keep, per joint, the type and line whose fit explains the frames where it moves best.
 
     ``fixed`` joints (trusted user joints, locked joints) keep their type and line. The joint's
-    hypotheses of both types (:func:`tool_hypotheses` when a robot held the parts,
-    :func:`hypotheses_of`) are scored by rendering at half resolution
+    hypotheses of both types (:func:`tool_hypotheses` when a robot held the parts, the
+    proposal's joint of the other type, :func:`alternative_of`, :func:`hypotheses_of`) are scored by rendering at half resolution
     at the time the part moves most (its value searched). The best of the other type is fitted
     (states searched at every time, coarse-to-fine with only this joint free), and so is the
     best of the joint's own type when it scores better than the joint itself (a hinge proposed
@@ -291,8 +305,8 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
         own = model.types[k]
         other = PRISMATIC if own == REVOLUTE else REVOLUTE
         core = seen_moving(model, frames, cfg, k)
-        tool = tool_hypotheses(model, frames, k)
-        hyps = {t: [h for h in tool if h[0] == t] + hypotheses_of(model, k, t, core)[:tries]
+        given = tool_hypotheses(model, frames, k) + run.alternatives.get(name, [])
+        hyps = {t: [h for h in given if h[0] == t] + hypotheses_of(model, k, t, core)[:tries]
                 for t in (own, other)}
         if not ids or not hyps[other]:
             run.done += share / len(todo)

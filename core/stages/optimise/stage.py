@@ -92,6 +92,8 @@ class Runner:
         self.phase = ""
         self.done = 0.0
         self.share = 0.0
+        #: per joint name, the proposal's joint of the other type (hypotheses.alternative_of)
+        self.alternatives: dict[str, list] = {}
 
     def run_fit(self, steps: int, phase: str, share: float, **kw: Any) -> float:
         """A fit that reports progress for ``share`` of the stage."""
@@ -176,6 +178,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if options.cameras:
         model.use_cameras(frames.camera)
     run = Runner(model, frames, cfg, progress, options, trust)
+    run.alternatives = {j.name: hypotheses.alternative_of(j, frames.times) for j in joints}
     n = options.iterations
     progress.log(f"optimise: {len(joints)} joint(s), {splat.n} Gaussians, "
                  f"{len(frames.time_index)} frames at {len(frames.times)} times, "
@@ -322,7 +325,7 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             confidence *= 0.5
         handle = src.handle if handle_holds(src, kind, pts, model.size) else \
             grasp(model, k, pts, axis, origin, means)
-        extra = dict(src.extra) if src is not None else {}
+        extra = {key: v for key, v in src.extra.items() if key != "alternative"} if src else {}
         extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
                      evidence=ev, warnings=warnings, into_body=round(inside, 4))
         if depth and name in depth:

@@ -30,6 +30,7 @@ class MotionConfig:
     jump_penalty: float = 0.5         # score cost of a pose far from the constant-velocity guess
     grow_score: float = 0.3           # steps tracked at least this well add points to the part
     grow_depth: float = 0.1           # ... from at most this far behind its closed front (m)
+    type_margin: float = 0.05         # the other type wins when it places the part this much better
     refine_rounds: int = 10           # rounds of joint refinement on the measurements ...
     refine_point_weight: float = 0.2  # ... with this weight of point-to-point residuals
     front_snap_deg: float = 25.0      # a slide this close to the front's normal is taken along it

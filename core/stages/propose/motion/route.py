@@ -13,7 +13,7 @@ from ....model.joints import Joint
 from ....model.progress import QUIET, Progress
 from ....geometry.consistency import unsupported
 from ....geometry.rigid import StepData, fit_joint
-from .assemble import finite, make_joint, refine_fit, snap_to_front, view_meta
+from .assemble import choose_type, finite, make_joint, snap_to_front, view_meta
 from .cameras import make_views, step_cloud
 from .change import mark_changed, moving_at, vanish_times
 from .config import MotionConfig
@@ -64,22 +64,33 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
         track = track_part(St, views, times, start, clouds, cfg)
         moving = [t for t in times if t >= start]
         weights = np.array([max(track.score[t], 0.05) for t in moving])
-        fit = fit_joint(St, [track.transforms[t] for t in moving], cfg.min_angle_deg, weights,
-                        cfg.min_rms_ratio)
+        transforms = [track.transforms[t] for t in moving]
+        rule = fit_joint(St, transforms, cfg.min_angle_deg, weights, cfg.min_rms_ratio)
         steps = [StepData(*clouds[t][:3], visible_filter(views, t)) for t in moving]
         thr = float(np.median([v.threshold for v in views]))
-        fit = refine_fit(fit, St, steps, views, moving, thr, cfg)
+        fit, other, scores = choose_type(rule, St, transforms, weights, steps, views, moving,
+                                         thr, cfg)
         snapped = None
         if fit.type == "prismatic":
             fit, snapped = snap_to_front(fit, S, cfg.front_snap_deg)
+        else:
+            other = snap_to_front(other, S, cfg.front_snap_deg)[0]
         values = {t: 0.0 for t in times if t < start}
         values.update({t: float(v) for t, v in zip(moving, fit.values)})
         joint = make_joint(k, fit, values, moving, S, track, views, clouds)
+        joint.extra["alternative"] = {
+            "type": other.type, "axis": [float(x) for x in other.axis],
+            "origin": [float(x) for x in other.origin],
+            "states": {**{str(t): 0.0 for t in times if t < start},
+                       **{str(t): float(v) for t, v in zip(moving, other.values)}}}
         joints.append(joint)
         diagnostics.append({"name": joint.name, "points": int(len(S)), "first_step": start,
                             "rms_revolute_mm": finite(1000 * fit.rms_revolute),
                             "rms_prismatic_mm": finite(1000 * fit.rms_prismatic),
                             "max_angle_deg": finite(fit.max_angle_deg),
+                            "score_revolute": finite(scores["revolute"]),
+                            "score_prismatic": finite(scores["prismatic"]),
+                            "type_by": "motion" if fit.type == rule.type else "depth",
                             "snapped_to_front_deg": snapped,
                             "score_min": finite(min(track.score[t] for t in moving)),
                             "icp_rms_mm": finite(1000 * np.median([track.rms[t]
