@@ -226,18 +226,12 @@ def _signed_angle(R: np.ndarray, a: np.ndarray) -> float:
     return math.atan2(float(Ru @ v), float(Ru @ u))
 
 
-def fit_joint(points: np.ndarray, transforms: list[np.ndarray], min_angle_deg: float = 5.0,
-              weights: np.ndarray | None = None, min_ratio: float = 3.0) -> JointFit:
-    """Fit one revolute and one prismatic joint to a part's motions and keep the right one.
-
-    ``points`` (N,3) are part points in the closed state; ``transforms[t]`` maps them to step t.
-    Both models are fitted jointly over all steps by least squares on the moved points
-    (``weights`` per step, default 1); the part is revolute when its largest rotation reaches
-    ``min_angle_deg`` and the slide leaves ``min_ratio`` times the turn's RMS residual (tracking
-    drift turns drawers by a few degrees, but a slide still explains them about as well).
-    Positive values open the part: the axis sign makes most values positive.
-    """
-    revolute, prismatic = fit_both(points, transforms, weights)
+def by_motion(revolute: JointFit, prismatic: JointFit, min_angle_deg: float = 5.0,
+              min_ratio: float = 3.0) -> JointFit:
+    """The type the motions show, between the two models of :func:`fit_both`: revolute when
+    the part's largest rotation reaches ``min_angle_deg`` and the slide leaves ``min_ratio``
+    times the turn's RMS residual (tracking drift turns drawers by a few degrees, but a slide
+    still explains them about as well), else prismatic."""
     if revolute.max_angle_deg >= min_angle_deg and \
             revolute.rms_prismatic > min_ratio * revolute.rms_revolute:
         return revolute
@@ -246,8 +240,12 @@ def fit_joint(points: np.ndarray, transforms: list[np.ndarray], min_angle_deg: f
 
 def fit_both(points: np.ndarray, transforms: list[np.ndarray],
              weights: np.ndarray | None = None) -> tuple[JointFit, JointFit]:
-    """The revolute and the prismatic joint that best explain a part's motions (least squares
-    on the moved points, see :func:`fit_joint`): both models, for a choice by other evidence."""
+    """The revolute and the prismatic joint that best explain a part's motions.
+
+    ``points`` (N,3) are part points in the closed state; ``transforms[t]`` maps them to step t.
+    Both models are fitted jointly over all steps by least squares on the moved points
+    (``weights`` per step, default 1). Positive values open the part: the axis sign makes most
+    values positive. :func:`by_motion` chooses between them by the motions alone."""
     X = points
     if len(X) > 400:
         X = X[np.random.default_rng(0).choice(len(X), 400, replace=False)]

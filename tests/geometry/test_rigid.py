@@ -9,7 +9,7 @@ import pytest
 
 from artgs.core.model.joints import joint_transform
 from artgs.core.geometry.metrics import axis_error_deg, line_distance
-from artgs.core.geometry.rigid import apply, fit_joint, icp, kabsch, robust_kabsch, rotation_log, screw_axis
+from artgs.core.geometry.rigid import apply, by_motion, fit_both, icp, kabsch, robust_kabsch, rotation_log, screw_axis
 
 
 def _box_surface(rng: np.random.Generator, size=(0.4, 0.02, 0.6), n=3000) -> np.ndarray:
@@ -81,7 +81,7 @@ def test_screw_fit_revolute(noise_deg):
         Ts.append(E @ T)
     a, p, th = screw_axis(Ts)
     assert axis_error_deg(a, axis) < 0.8 + 2 * noise_deg
-    fit = fit_joint(X, Ts)
+    fit = by_motion(*fit_both(X, Ts))
     assert fit.type == "revolute"
     assert axis_error_deg(fit.axis, axis) < 0.2 + noise_deg
     assert 100 * line_distance(fit.origin, fit.axis, origin, axis) < 0.3 + 2 * noise_deg
@@ -99,7 +99,7 @@ def test_screw_fit_prismatic_with_negative_motion_direction():
     for v in values:
         E = joint_transform("revolute", rng.normal(size=3), X.mean(0), math.radians(0.3))
         Ts.append(E @ joint_transform("prismatic", d, np.zeros(3), v))
-    fit = fit_joint(X, Ts)
+    fit = by_motion(*fit_both(X, Ts))
     assert fit.type == "prismatic"
     assert axis_error_deg(fit.axis, d) < 0.5 and fit.axis @ d > 0
     assert np.allclose(fit.values, values, atol=0.003)

@@ -294,8 +294,9 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
     hinge proposed on the wrong edge, or one the main fit could not carry far enough: a PartNet
     oven's hinge proposed 0.9 deg but 9 cm off stayed in a basin that a slide beat, 0.5488
     against 0.5393, while the restart from its box edge reached 0.5387 and 1.5 deg / 1.0 cm).
-    The fit with the lowest image loss over the frames where the part moves is kept. Returns per joint the evidence: each type's loss, the kept type, the relative
-    margin between the types and whether a restart of its own type was kept.
+    The fit with the lowest image loss over the frames where the part moves is kept. Returns
+    per joint the evidence: each type's loss, the kept type, the relative margin between the
+    types and whether a restart of its own type was kept.
     """
     model, frames, cfg = run.model, run.frames, run.cfg
     evidence: dict[str, dict[str, Any]] = {}

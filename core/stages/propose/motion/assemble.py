@@ -11,8 +11,7 @@ import numpy as np
 
 from ....model.joints import Joint, joint_transform
 from ....geometry.parts import handle_point
-from ....geometry.rigid import (StepData, apply, fit_both, invert, refine_joint,
-                                tukey_weights)
+from ....geometry.rigid import StepData, apply, invert, refine_joint, tukey_weights
 from .cameras import InteractionView
 from .config import MotionConfig
 from .parts import box_of
@@ -60,22 +59,22 @@ def motion_score(fit, St: np.ndarray, views: list[InteractionView], moving: list
                                            views, t) for t, v in zip(moving, fit.values)]))
 
 
-def choose_type(fit, St: np.ndarray, transforms: list[np.ndarray], weights: np.ndarray,
-                steps: list[StepData], views: list[InteractionView], moving: list[int],
-                thr: float, cfg: MotionConfig) -> tuple[Any, Any, dict[str, float]]:
+def choose_type(fit, both: tuple, St: np.ndarray, steps: list[StepData],
+                views: list[InteractionView], moving: list[int], thr: float,
+                cfg: MotionConfig) -> tuple[Any, Any, dict[str, float]]:
     """The joint of the part and the best joint of the other type, both refined on the
     measurements (:func:`refine_fit`), and the :func:`motion_score` of each type.
 
-    ``fit`` is the motion rule's choice (:func:`fit_joint`: a turn the tracked poses show and a
-    slide cannot explain). On far, noisy cameras the tracked poses drift by tens of degrees and
+    ``both`` are the two models fitted to the tracked poses (``rigid.fit_both``), ``fit`` the
+    motion rule's choice between them (``rigid.by_motion``: a turn the tracked poses show and
+    a slide cannot explain). On far, noisy cameras the tracked poses drift by tens of degrees and
     tens of millimetres, so the rule calls nearly everything a slide (a microwave door tracked
     through 104 degrees: both models 45 mm RMS); where the other type places the part on the
     depth maps better by ``cfg.type_margin`` it is taken instead. The margin keeps drawers
     slides: a hinge far away mimics a slide and scores within a few thousandths of it."""
     scores, fits = {}, {}
-    for cand in fit_both(St, transforms, weights):
-        cand = refine_fit(fit if cand.type == fit.type else cand, St, steps, views, moving, thr,
-                          cfg)
+    for cand in both:
+        cand = refine_fit(cand, St, steps, views, moving, thr, cfg)
         fits[cand.type], scores[cand.type] = cand, motion_score(cand, St, views, moving)
     other = "prismatic" if fit.type == "revolute" else "revolute"
     if scores[other] > scores[fit.type] + cfg.type_margin:

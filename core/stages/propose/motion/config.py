@@ -24,7 +24,7 @@ class MotionConfig:
     min_part_fraction: float = 0.01   # ... or smaller than this share of the splat points
     track_points: int = 1200          # part points used for tracking
     min_angle_deg: float = 8.0        # revolute when the part turns at least this much ...
-    min_rms_ratio: float = 3.0        # ... and a slide fits that much worse (rigid.fit_joint)
+    min_rms_ratio: float = 3.0        # ... and a slide fits that much worse (rigid.by_motion)
     icp_iterations: int = 30
     icp_candidates: int = 5           # best-scoring pose hypotheses refined by ICP per step
     jump_penalty: float = 0.5         # score cost of a pose far from the constant-velocity guess

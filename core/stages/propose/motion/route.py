@@ -12,7 +12,7 @@ from ....model.capture import Capture
 from ....model.joints import Joint
 from ....model.progress import QUIET, Progress
 from ....geometry.consistency import unsupported
-from ....geometry.rigid import StepData, fit_joint
+from ....geometry.rigid import StepData, by_motion, fit_both
 from .assemble import choose_type, finite, make_joint, snap_to_front, view_meta
 from .cameras import make_views, step_cloud
 from .change import mark_changed, moving_at, vanish_times
@@ -64,12 +64,11 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
         track = track_part(St, views, times, start, clouds, cfg)
         moving = [t for t in times if t >= start]
         weights = np.array([max(track.score[t], 0.05) for t in moving])
-        transforms = [track.transforms[t] for t in moving]
-        rule = fit_joint(St, transforms, cfg.min_angle_deg, weights, cfg.min_rms_ratio)
+        both = fit_both(St, [track.transforms[t] for t in moving], weights)
+        rule = by_motion(*both, cfg.min_angle_deg, cfg.min_rms_ratio)
         steps = [StepData(*clouds[t][:3], visible_filter(views, t)) for t in moving]
         thr = float(np.median([v.threshold for v in views]))
-        fit, other, scores = choose_type(rule, St, transforms, weights, steps, views, moving,
-                                         thr, cfg)
+        fit, other, scores = choose_type(rule, both, St, steps, views, moving, thr, cfg)
         snapped = None
         if fit.type == "prismatic":
             fit, snapped = snap_to_front(fit, S, cfg.front_snap_deg)
