@@ -162,7 +162,7 @@ def alternative_of(joint, times: list[int]) -> list[tuple[str, np.ndarray, np.nd
     route, where both types are refined on the measured points: ``choose_type`` in
     core/stages/propose/motion/assemble.py) as a hypothesis, with its values at ``times``;
     none when the proposal has none."""
-    alt = joint.extra.get("alternative") if joint is not None else None
+    alt = joint.extra.get("alternative")
     if not alt or alt.get("type") not in (PRISMATIC, REVOLUTE):
         return []
     states = alt.get("states") or {}

@@ -19,8 +19,9 @@ Steps (all in the world frame, metres):
    the measured points that moved in with it (a door's inner face, a drawer's sides).
 5. One revolute and one prismatic joint are fitted to all the part's poses jointly
    (core.geometry.rigid.fit_both); by the motions (``by_motion``) the part is revolute if it
-   turns and a slide explains it clearly worse. Both joints are then refined on the measurements of all steps at once
-   (core.geometry.rigid.refine_joint) using the splat's own part points, and the other type
+   turns and a slide explains it clearly worse. Both joints are then refined on the
+   measurements of all steps at once (core.geometry.rigid.refine_joint) using the splat's own
+   part points, and the other type
    replaces the rule's when it places the part on the depth maps clearly better (``type_margin``
    of the projective score; far, noisy cameras make tracked poses drift so much that the rule
    calls doors slides); the type not taken is kept as the joint's ``alternative``, which the

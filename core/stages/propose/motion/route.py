@@ -74,14 +74,16 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
             fit, snapped = snap_to_front(fit, S, cfg.front_snap_deg)
         else:
             other = snap_to_front(other, S, cfg.front_snap_deg)[0]
-        values = {t: 0.0 for t in times if t < start}
-        values.update({t: float(v) for t, v in zip(moving, fit.values)})
-        joint = make_joint(k, fit, values, moving, S, track, views, clouds)
+        def states(f) -> dict[int, float]:
+            """The fit's value at every time (closed before the part starts moving)."""
+            return {**{t: 0.0 for t in times if t < start},
+                    **{t: float(v) for t, v in zip(moving, f.values)}}
+
+        joint = make_joint(k, fit, states(fit), moving, S, track, views, clouds)
         joint.extra["alternative"] = {
             "type": other.type, "axis": [float(x) for x in other.axis],
             "origin": [float(x) for x in other.origin],
-            "states": {**{str(t): 0.0 for t in times if t < start},
-                       **{str(t): float(v) for t, v in zip(moving, other.values)}}}
+            "states": {str(t): v for t, v in states(other).items()}}
         joints.append(joint)
         diagnostics.append({"name": joint.name, "points": int(len(S)), "first_step": start,
                             "rms_revolute_mm": finite(1000 * fit.rms_revolute),
