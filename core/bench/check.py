@@ -2,7 +2,7 @@
 
 For each capture of the benchmark set (core/bench/sets.py: ``--set tight|realistic|partnet:DIR|
 data:DIR``): propose joints (motion route, on the
-depth-initialised splat unless ``--iterations``), then a robot opens every part of the capture's
+static splat of :func:`.runs.prepare`), then a robot opens every part of the capture's
 ground-truth ``gt.urdf`` along the proposed joints (core/sim/manipulate.py): "proposals only".
 When the project has an ``optimise`` stage it is run next and the check repeated: "with
 optimisation" (when the motion route finds nothing, no part opens on proposals alone and the
@@ -27,7 +27,7 @@ from ..model.progress import QUIET, Progress
 from ..model.registry import CheckOptions
 from .options import BenchCheckOptions
 from .runs import (ROBOT_FREE, Variant, materialise_variants, motion_proposals, plan_variants,
-                   prepare, run_variants)
+                   prepare, run_variants, splat_label)
 from .sets import parse_set
 
 
@@ -110,7 +110,7 @@ def bench_check(args: BenchCheckOptions, progress: Progress) -> int:
                           variants=json.dumps([{"title": v.title, "results": results}
                                                for v, results in runs]))
         return 0
-    print(f"set {bset.label}, robot {args.robot}, splat iterations {args.iterations}, "
+    print(f"set {bset.label}, robot {args.robot}, splat {splat_label(args.iterations)}, "
           f"{len(sets[0][1])} captures")
     for v, results in runs:
         if len(runs) > 1:

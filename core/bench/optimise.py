@@ -2,7 +2,7 @@
 
 For each capture of the benchmark set (core.bench.sets: ``--set tight|realistic|partnet:DIR``,
 generated into a temporary folder, or ``--data DIR``):
-the static splat (depth-initialised, or reconstructed for ``--iterations``), the motion route's
+the static splat (:func:`.runs.prepare`: reconstructed until converged, or per ``--iterations``), the motion route's
 proposals (core.stages.propose), then the optimisation (core.stages.optimise); both scored against
 ``gt.json`` (core.geometry.metrics.match_joints). Prints per category: joints, type accuracy, AE
 mean/worst (deg), OE mean/worst (cm, revolute joints) before -> after, and wall and CPU seconds
@@ -33,7 +33,8 @@ from ..model.progress import QUIET, Progress
 from ..model.registry import OptimiseOptions
 from .options import BenchOptimiseOptions
 from .propose import summarize
-from .runs import materialise_variants, motion_proposals, plan_variants, prepare, run_variants
+from .runs import (materialise_variants, motion_proposals, plan_variants, prepare, run_variants,
+                   splat_label)
 from .sets import parse_set
 
 
@@ -69,7 +70,8 @@ def optimised_joints(out: Path, capture: Capture, options: OptimiseOptions) -> l
     return read_articulation(out / layout.ARTICULATION).joints
 
 
-def bench_capture(capture_dir: Path, work: Path, options: OptimiseOptions, iterations: int = 0,
+def bench_capture(capture_dir: Path, work: Path, options: OptimiseOptions,
+                  iterations: int | None = 0,
                   basin: int = 0, seed: int = 0) -> dict:
     """Propose, optimise and score one capture; plus ``basin`` perturbed-start runs. The
     proposals use the twin as the optimisation does (``options.robot_twin``)."""
@@ -160,7 +162,7 @@ def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
                           variants=json.dumps([{"title": v.title, "before": b, "after": a}
                                                for v, b, a, _ in tables]))
         return 0
-    print(f"set {bset.label}, {len(sets[0][1])} captures, splat iterations {args.iterations}, "
+    print(f"set {bset.label}, {len(sets[0][1])} captures, splat {splat_label(args.iterations)}, "
           f"optimisation iterations {args.opt_iterations}")
     for v, before, after, results in tables:
         if len(tables) > 1:

@@ -59,8 +59,9 @@ class SetOptions:
                                         choices=CATEGORIES + EXTRA_KINDS)
     width: int = option(160, "generated sets: image width")
     height: int = option(120, "generated sets: image height")
-    iterations: int = option(0, "optimise the static splat this many iterations (default 0: the "
-                             "depth-initialised splat)")
+    iterations: int | None = option(None, "static splat: reconstruction iteration cap (default: "
+                                    "until converged, as artgs run; 0: the depth-initialised "
+                                    "splat, faster and less accurate)")
     device: str = option("auto", "where torch work runs", choices=DEVICES)
 
 

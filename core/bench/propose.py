@@ -2,8 +2,8 @@
 
 For each capture of the benchmark set (core.bench.sets: ``--set tight|realistic|partnet:DIR``,
 generated into a temporary folder, or ``--data DIR``):
-initialise the static splat from the static views (core.reconstruct.initial_splats, or optimise
-it with core.reconstruct.reconstruct for ``--iterations``), run the motion route
+make the static splat (:func:`.runs.prepare`: reconstructed until converged as ``artgs run`` does,
+or ``--iterations`` N; 0 = depth-initialised, faster and less accurate), run the motion route
 (core.propose.propose) and score it against ``gt.json`` (core.metrics.match_joints).
 Prints per category: joints, type accuracy, AE mean/worst (deg), OE mean/worst (cm, revolute
 joints), seconds per capture; then overall.
@@ -22,15 +22,16 @@ import numpy as np
 from ..geometry.metrics import match_joints
 from ..model.progress import Progress
 from .options import BenchProposeOptions
-from .runs import materialise_variants, motion_proposals, plan_variants, prepare, run_variants
+from .runs import (materialise_variants, motion_proposals, plan_variants, prepare, run_variants,
+                   splat_label)
 from .sets import parse_set
 
 
-def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int = 0,
+def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int | None = 0,
                   robot_twin: bool = True) -> dict:
     """Propose joints for one synthetic capture and score them against its gt.json.
 
-    The static splat is the depth-initialised one, or optimised for ``iterations`` iterations.
+    The static splat: :func:`.runs.prepare` (``iterations``).
     """
     capture, gt, out = prepare(capture_dir, work, iterations, device)
     t0 = time.perf_counter()
@@ -104,7 +105,7 @@ def bench_propose(args: BenchProposeOptions, progress: Progress) -> int:
                           results=json.dumps(tables[0][2]))
     else:
         print(f"set {bset.label}, seed {args.seed}, depth noise {args.depth_noise} m, "
-              f"simultaneous {args.simultaneous}, splat iterations {args.iterations}, "
+              f"simultaneous {args.simultaneous}, splat {splat_label(args.iterations)}, "
               f"{len(captures)} captures")
         for variant, rows, _ in tables:
             if len(tables) > 1:

@@ -85,21 +85,30 @@ def run_variants(sets: Sequence[tuple[Variant, list[Path]]],
     return out
 
 
-def prepare(capture_dir: Path, work: Path, iterations: int = 0,
+def prepare(capture_dir: Path, work: Path, iterations: int | None = 0,
             device: str = "auto") -> tuple[Capture, Articulation, Path]:
     """The capture, its ``gt.json`` and ``work/<capture>/`` holding the static splat:
-    depth-initialised, or reconstructed for ``iterations`` iterations."""
+    depth-initialised (``iterations`` 0), or reconstructed for ``iterations`` iterations (None:
+    until converged, as ``artgs run``)."""
     from ..stages.reconstruct import initial_splats, reconstruct
 
     capture = load_capture(capture_dir)
     gt = read_articulation(capture_dir / "gt.json")
     out = work / capture_dir.name
     out.mkdir(parents=True, exist_ok=True)
-    if iterations > 0:
+    if iterations != 0:
         reconstruct(capture, out, QUIET, iterations=iterations, device=device)
     else:
         write_ply(out / layout.SPLAT, initial_splats(capture.static)[0])
     return capture, gt, out
+
+
+def splat_label(iterations: int | None) -> str:
+    """How the benchmark's static splat was made, for its header line."""
+    if iterations == 0:
+        return "depth-initialised"
+    return "reconstructed " + ("until converged" if iterations is None else
+                               f"for {iterations} iterations")
 
 
 def motion_proposals(capture: Capture, out: Path, device: str = "auto",
