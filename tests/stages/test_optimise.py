@@ -292,34 +292,6 @@ def test_spurious_part_removed(cabinet, tmp_path):
     assert labels.max() == 2
 
 
-def test_pieces_of_one_part_merged(cabinet, tmp_path):
-    """The door proposed as two pieces (its box halved), one with the true hinge and one turned
-    25 degrees: the pieces become one part on the true hinge; the drawer stays apart."""
-    gt = read_articulation(cabinet / "gt.json")
-    door = next(j for j in gt.joints if j.type == "revolute")
-    box = door.extent
-    long = int(np.argmax(box["half_size"]))
-    pieces = []
-    for sign, name in ((1.0, "upper"), (-1.0, "lower")):
-        piece = copy.deepcopy(door) if sign > 0 else _perturb(door, 25.0, 0.0, 3)
-        half = list(box["half_size"])
-        half[long] /= 2
-        piece.name, piece.child = name, f"{name}_link"
-        piece.extent = {"center": list(np.add(box["center"],
-                                              sign * half[long] * np.array(box["axes"][long]))),
-                        "axes": box["axes"], "half_size": half}
-        pieces.append(piece)
-    drawer = next(j for j in gt.joints if j.type == "prismatic")
-    out = _out(tmp_path, cabinet, [drawer] + pieces)
-    figures = optimise(out, load_capture(cabinet), QUIET,
-                       OptimiseOptions(iterations=60, types=False, parts=True))
-    art = read_articulation(out / layout.ARTICULATION)
-    assert [m["part"] for m in figures["merged"]] == ["lower"], figures
-    assert sorted(j.name for j in art.joints) == sorted([drawer.name, "upper"])
-    s = match_joints(art.joints, [door])[0]
-    assert s.axis_error_deg < 3.0 and s.origin_error_cm < 3.0, s
-
-
 def test_missed_part_added(cabinet, tmp_path):
     """Only the drawer is proposed; the door the frames show opening becomes a new hinge."""
     gt = read_articulation(cabinet / "gt.json")

@@ -28,9 +28,6 @@ REMOVE_TOL = 1e-3
 #: better than its absence (a part whose motion only fits noise wins on some frames, loses on
 #: others).
 SIGNIFICANT = 3.0
-#: Share of the loss its own joint explains that a part keeps moved by another part's joint,
-#: above which it is a piece of that part (:func:`merge_parts`).
-MERGE_SHARE = 0.8
 
 
 def clearly_better(without: np.ndarray, with_: np.ndarray, ids: list[int]) -> bool:
@@ -359,55 +356,6 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 16) -> dict[
                          " (image loss " + ", ".join(f"{v:.4f} {t}" for t, v in losses.items())
                          + ")")
     return evidence
-
-def merge_parts(run, locked: list[bool]) -> list[tuple[str, str]]:
-    """Merge parts that are pieces of one rigid part. The motion route groups what it sees
-    vanish; on far, noisy cameras one door or drawer front falls into several groups, each with
-    its own joint (a realistic dishwasher's door: two slides; a PartNet drawer: six), and no
-    piece's box has the whole part's edges to start a hinge from.
-
-    Part j's own joint explains the frames better than its Gaussians at rest (the base) by a
-    gain; given to part i (moved by i's joint) they keep a share of that gain. j merges into the
-    part where that share is highest when it is at least ``MERGE_SHARE``: a piece of i moved by
-    i's joint explains its frames almost as well as by a joint of its own (fitted to it alone,
-    its own is always a little better), while a part that moves at other times or along another
-    line loses most of its gain moved by i's. A part whose joint gains nothing is left to
-    :func:`remove_spurious`. Repeated until no part merges; only with a hard assignment (before
-    the skinning is learnt). Returns (merged, into) name pairs."""
-    model, frames, cfg = run.model, run.frames, run.cfg
-    merged: list[tuple[str, str]] = []
-    while model.k > 1 and model.hard is not None:
-        hard, logits = model.hard.clone(), model.logits.detach().clone()
-        here = float(evaluate(model, frames, cfg).mean())
-        best = (MERGE_SHARE, -1, -1)
-        for j in range(model.k):
-            members = (hard == j + 1).cpu().numpy()
-            if locked[j] or not members.any():
-                continue
-            loss = []
-            for dest in range(model.k + 1):
-                model.reassign(members, dest)
-                loss.append(float(evaluate(model, frames, cfg).mean()) if dest != j + 1 else here)
-                model.hard, model.logits = hard.clone(), logits.clone()
-                run.progress.check_cancel()
-            gain = loss[0] - here
-            if gain <= 0:
-                continue
-            for i in range(model.k):
-                share = (loss[0] - loss[i + 1]) / gain
-                if i != j and share >= best[0]:
-                    best = (share, j, i)
-        share, j, i = best
-        if j < 0:
-            break
-        run.progress.log(f"{model.names[j]}: merged into {model.names[i]} (moved by its joint, "
-                         f"the part keeps {100 * share:.0f} % of what its own joint explains)")
-        merged.append((model.names[j], model.names[i]))
-        model.reassign((hard == j + 1).cpu().numpy(), i + 1)
-        model.drop(j)
-        run.trust = torch.cat([run.trust[:j], run.trust[j + 1:]])
-        locked = locked[:j] + locked[j + 1:]
-    return merged
 
 def remove_spurious(run, locked: list[bool]) -> list[str]:
     """Remove the joints whose motion does not clearly explain the frames where the part moves

@@ -192,14 +192,11 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
             search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
     trimmed = seen.trim_parts(run, locked=model.locked.tolist()) if options.parts else {}
     run.run_fit(n, "joints", 0.25, coarse=cfg.coarse)
-    merged = hypotheses.merge_parts(run, locked=model.locked.tolist()) \
-        if options.parts and model.k > 1 else []
     evidence: dict[str, dict[str, Any]] = {}
     if options.types and model.k:
-        by_name = {j.name: j for j in joints}
         evidence = hypotheses.select_types(run, share=0.35,
-                                           fixed=[by_name[n].source == "user"
-                                                  or is_locked(by_name[n]) for n in model.names])
+                                           fixed=[j.source == "user" or is_locked(j)
+                                                  for j in joints])
     removed: list[str] = []
     if options.parts and model.k:
         removed = hypotheses.remove_spurious(run, locked=model.locked.tolist())
@@ -232,13 +229,11 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     meta = {k: v for k, v in proposals.meta.items() if k != "optimised"}
     articulation = Articulation(result, {**meta, "optimised": True,
                                          "loss": float(losses.mean()), "removed": removed,
-                                         "merged": [a for a, _ in merged],
                                          "added": added})
     figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
                "trimmed": trimmed, "assigned": assigned,
                "cameras": camera_corrections(model),
-               "kept_start": kept_start, "added": added,
-               "merged": [{"part": a, "into": b} for a, b in merged], "depth": depth,
+               "kept_start": kept_start, "added": added, "depth": depth,
                "types": [j.type for j in result],
                "seconds": round(time.perf_counter() - t0, 2)}
     write_labels(out / layout.PART_LABELS, model.labels())
