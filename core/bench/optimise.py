@@ -2,8 +2,9 @@
 
 For each capture of the benchmark set (core.bench.sets: ``--set tight|realistic|partnet:DIR``,
 generated into a temporary folder, or ``--data DIR``):
-the static splat (:func:`.runs.prepare`: reconstructed until converged, or per ``--iterations``), the motion route's
-proposals (core.stages.propose), then the optimisation (core.stages.optimise); both scored against
+the static splat (:func:`.runs.prepare`: reconstructed until converged, or per
+``--iterations``), the motion route's proposals (core.stages.propose), then the optimisation
+(core.stages.optimise); both scored against
 ``gt.json`` (core.geometry.metrics.match_joints). Prints per category: joints, type accuracy, AE
 mean/worst (deg), OE mean/worst (cm, revolute joints) before -> after, and wall and CPU seconds
 of optimisation per object; then the basin rate: from ``--basin`` starts per capture made from the

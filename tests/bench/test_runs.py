@@ -162,3 +162,15 @@ def test_bench_check_counts_an_optimisation_that_finds_nothing_as_not_opened(tmp
     monkeypatch.setattr(bench_check, "check_out", lambda *a: next(results))
     r = bench_check.bench_capture(tmp_path / "cabinet_00", tmp_path / "out", BenchCheckOptions())
     assert r["proposals"]["door"]["success"] and not r["optimised"]["door"]["success"]
+
+
+def test_benchmarks_default_to_the_reconstructed_splat():
+    """The benchmarks' static splat is artgs run's (reconstructed until converged) unless
+    --iterations says otherwise (0: the depth-initialised splat); the header names it."""
+    assert build(BenchOptimiseOptions, build_parser().parse_args(["bench-optimise"])).iterations \
+        is None
+    assert build(BenchCheckOptions, build_parser().parse_args(
+        ["bench-check", "--iterations", "0"])).iterations == 0
+    assert runs.splat_label(None) == "reconstructed until converged"
+    assert runs.splat_label(0) == "depth-initialised"
+    assert runs.splat_label(500) == "reconstructed for 500 iterations"
