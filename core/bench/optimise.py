@@ -72,8 +72,7 @@ def optimised_joints(out: Path, capture: Capture, options: OptimiseOptions) -> l
 
 
 def bench_capture(capture_dir: Path, work: Path, options: OptimiseOptions,
-                  iterations: int | None = 0,
-                  basin: int = 0, seed: int = 0) -> dict:
+                  iterations: int | None = None, basin: int = 0, seed: int = 0) -> dict:
     """Propose, optimise and score one capture; plus ``basin`` perturbed-start runs. The
     proposals use the twin as the optimisation does (``options.robot_twin``)."""
     capture, gt, out = prepare(capture_dir, work, iterations, options.device)

@@ -27,7 +27,8 @@ from .runs import (materialise_variants, motion_proposals, plan_variants, prepar
 from .sets import parse_set
 
 
-def bench_capture(capture_dir: Path, work: Path, device: str = "auto", iterations: int | None = 0,
+def bench_capture(capture_dir: Path, work: Path, device: str = "auto",
+                  iterations: int | None = None,
                   robot_twin: bool = True) -> dict:
     """Propose joints for one synthetic capture and score them against its gt.json.
 

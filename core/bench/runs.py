@@ -85,7 +85,7 @@ def run_variants(sets: Sequence[tuple[Variant, list[Path]]],
     return out
 
 
-def prepare(capture_dir: Path, work: Path, iterations: int | None = 0,
+def prepare(capture_dir: Path, work: Path, iterations: int | None = None,
             device: str = "auto") -> tuple[Capture, Articulation, Path]:
     """The capture, its ``gt.json`` and ``work/<capture>/`` holding the static splat:
     depth-initialised (``iterations`` 0), or reconstructed for ``iterations`` iterations (None:
