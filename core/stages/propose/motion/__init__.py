@@ -21,11 +21,10 @@ Steps (all in the world frame, metres):
    (core.geometry.rigid.fit_both); by the motions (``by_motion``) the part is revolute if it
    turns and a slide explains it clearly worse. Both joints are then refined on the
    measurements of all steps at once (core.geometry.rigid.refine_joint) using the splat's own
-   part points, and the other type
-   replaces the rule's when it places the part on the depth maps clearly better (``type_margin``
-   of the projective score; far, noisy cameras make tracked poses drift so much that the rule
-   calls doors slides); the type not taken is kept as the joint's ``alternative``, which the
-   optimisation scores among its type hypotheses. A slide within
+   part points, and the other type replaces the rule's when it places the part on the depth maps
+   clearly better (``type_margin`` of the projective score; far, noisy cameras make tracked poses
+   drift so much that the rule calls doors slides); the type not taken is kept as the joint's
+   ``alternative``, which the optimisation scores among its type hypotheses. A slide within
    ``front_snap_deg`` of the part front's normal is taken along that normal (a flat front measures
    only that component).
 6. Joint values per step are ``states`` (positive = open), the observed range is ``limit``;
