@@ -42,9 +42,32 @@ def ssim_map(x: torch.Tensor, y: torch.Tensor, size: int = 11, sigma: float = 1.
     return s.mean(0)
 
 
-def ssim(x: torch.Tensor, y: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
-    """Mean SSIM of (H,W,C) images, over ``mask`` (H,W bool) pixels if given."""
-    s = ssim_map(x, y)
-    if mask is None:
-        return s.mean()
-    return (s * mask).sum() / mask.sum().clamp_min(1)
+def ssim(x: torch.Tensor, y: torch.Tensor, mask: torch.Tensor | None = None,
+         size: int = 11) -> torch.Tensor:
+    """Mean SSIM of (H,W,C) images, over ``mask`` (H,W bool) pixels if given.
+
+    Only the box where either image is not zero, grown by half the window, is filtered: a
+    window of zeros in both images has SSIM exactly 1, and an object's frame (zero outside its
+    mask) and its render (zero where no Gaussian reaches) are mostly that."""
+    m = torch.ones(x.shape[:2], dtype=x.dtype, device=x.device) if mask is None else \
+        mask.to(x.dtype)
+    box = _active_box(x, y, size // 2)
+    if box is None:
+        return m.sum() / m.sum().clamp_min(1)
+    r, c = box
+    s = ssim_map(x[r, c], y[r, c], size)
+    outside = m.sum() - m[r, c].sum()
+    return ((s * m[r, c]).sum() + outside) / m.sum().clamp_min(1)
+
+
+def _active_box(x: torch.Tensor, y: torch.Tensor, pad: int) -> tuple[slice, slice] | None:
+    """Rows and columns of the box holding every pixel where ``x`` or ``y`` is not zero, grown
+    by ``pad``; None when both are zero everywhere."""
+    with torch.no_grad():
+        nz = (x != 0).any(-1) | (y != 0).any(-1)
+        rows, cols = torch.nonzero(nz.any(1)).view(-1), torch.nonzero(nz.any(0)).view(-1)
+    if not len(rows):
+        return None
+    h, w = nz.shape
+    return (slice(max(int(rows[0]) - pad, 0), min(int(rows[-1]) + pad + 1, h)),
+            slice(max(int(cols[0]) - pad, 0), min(int(cols[-1]) + pad + 1, w)))

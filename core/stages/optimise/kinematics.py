@@ -69,15 +69,23 @@ def skin(means: torch.Tensor, quats: torch.Tensor, weights: torch.Tensor, R: tor
     return out_means, quat_multiply(blend, quats)
 
 
+def part_members(labels: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The Gaussians of the parts in ``labels`` (N,) (0 = base): their indices and part (k − 1)."""
+    idx = torch.nonzero(labels > 0).squeeze(1)
+    return idx, labels[idx] - 1
+
+
 def skin_rigid(means: torch.Tensor, quats: torch.Tensor, labels: torch.Tensor, R: torch.Tensor,
-               t: torch.Tensor, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+               t: torch.Tensor, q: torch.Tensor,
+               members: tuple[torch.Tensor, torch.Tensor] | None = None
+               ) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`skin` with one-hot weights given as ``labels`` (N,) (0 = base, k = part k − 1):
     each Gaussian of a part moves rigidly with it, the base's are returned as they are. Same
-    result as :func:`skin`, at a fraction of the cost (only the parts' Gaussians are touched)."""
-    idx = torch.nonzero(labels > 0).squeeze(1)
+    result as :func:`skin`, at a fraction of the cost (only the parts' Gaussians are touched).
+    ``members``: :func:`part_members` of ``labels``, when the caller keeps them."""
+    idx, part = part_members(labels) if members is None else members
     if len(idx) == 0:
         return means, quats
-    part = labels[idx] - 1
     moved = torch.einsum("nij,nj->ni", R[part], means[idx]) + t[part]
     turned = quat_multiply(q[part], quats[idx])
     return means.index_put((idx,), moved), quats.index_put((idx,), turned)

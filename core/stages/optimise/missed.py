@@ -58,14 +58,17 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     that turns half the object by half a degree absorbs small registration errors, it is not a
     part). A kept part explains
     its changes (and those of what it hid), so the changes are found again before the next of
-    at most ``tries`` parts. Returns the names of the added joints."""
+    at most ``tries`` attempts; a rejected cluster is left out of the next ones (the frames
+    may show another part moving beside a piece no joint explains). Returns the names of the
+    added joints."""
     model, frames, cfg = run.model, run.frames, run.cfg
     means = model.splat.means.cpu().numpy().astype(float)
     added: list[str] = []
+    tried = np.zeros(model.splat.n, bool)
     steps = max(run.options.iterations // 2, 1)
     for attempt in range(tries):
         hits = unexplained(model, frames, cfg)
-        flagged = np.flatnonzero(hits.any(0))
+        flagged = np.flatnonzero(hits.any(0) & ~tried)
         g = first_mover(means[flagged], hits[:, flagged].argmax(0),
                         max(10, model.splat.n // 100))
         if g is None:
@@ -122,7 +125,8 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             model.drop(k)
             run.trust = run.trust[:-1]
             restore(model, kept)
-            break
+            tried |= members
+            continue
         into = merge_target(model, frames, cfg, k, after)
         if into is None:
             added.append(name)
