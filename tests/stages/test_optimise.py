@@ -138,6 +138,52 @@ def test_hard_skinning_is_the_rigid_motion():
                                atol=1e-12)
 
 
+def _small_model(n: int = 300, parts: int = 2):
+    """An ArticulatedSplat of ``n`` random Gaussians (SH degree 1) and ``parts`` revolute joints,
+    Gaussian i in part i mod (parts + 1)."""
+    from artgs.core.model.ply import SplatArrays
+    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
+    rng = np.random.default_rng(3)
+    arrays = SplatArrays(rng.normal(0, 0.2, (n, 3)), np.tile([1.0, 0, 0, 0], (n, 1)),
+                         np.full((n, 3), np.log(0.03)), np.full(n, 2.0),
+                         rng.normal(0, 0.5, (n, 4, 3)))
+    joints = [Joint(name=f"j{k}", type="revolute", axis=np.array([0.0, 0, 1]),
+                    origin=np.array([0.1 * k, 0, 0])) for k in range(parts)]
+    labels = np.arange(n) % (parts + 1)
+    return ArticulatedSplat(Splat.from_arrays(arrays, torch.device("cpu")), joints, [0, 1],
+                            labels, 1.0, [False] * parts)
+
+
+def test_a_dropped_joints_gaussians_go_to_the_base():
+    """Dropping a joint gives its Gaussians to the base, soft weights too (a soft fit after the
+    drop must not share them among the other parts); the other part keeps its own."""
+    model = _small_model()
+    model.drop(0)
+    w = model.weights()
+    labels = np.arange(300) % 3
+    assert model.k == 1 and w.shape == (300, 2)
+    assert float(w[torch.as_tensor(labels == 1), 0].min()) > 0.99
+    assert float(w[torch.as_tensor(labels == 2), 1].min()) > 0.99
+
+
+def test_colours_seen_from_a_camera_are_the_splats_sh():
+    """The colours evaluated once per camera (as degree-0 SH) render the canonical splat as
+    its own SH do; cached per camera centre."""
+    from artgs.core.render.rasterize import rasterize
+    from artgs.core.model.cameras import Camera, look_at
+    model = _small_model()
+    s = model.splat
+    K = np.array([[60.0, 0, 32], [0, 60.0, 24], [0, 0, 1]])
+    w2c = torch.as_tensor(Camera(K, look_at(np.array([0.4, -1.5, 0.3]), np.zeros(3)), 64,
+                                 48).w2c, dtype=torch.float32)
+    baked = s.colours_from(w2c)
+    assert baked.shape == (300, 1, 3) and s.colours_from(w2c.clone()) is baked
+    a = rasterize(s.means, s.quats, s.log_scales, s.opacity_logits, s.sh, K, w2c, 64, 48)
+    b = rasterize(s.means, s.quats, s.log_scales, s.opacity_logits, baked, K, w2c, 64, 48)
+    assert float(a.alpha.max()) > 0.5
+    np.testing.assert_allclose(b.rgb.numpy(), a.rgb.numpy(), atol=1e-5)
+
+
 # --- the stage -----------------------------------------------------------------------------------
 
 def test_recovers_perturbed_joints(cabinet, tmp_path):
