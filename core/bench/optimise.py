@@ -8,8 +8,9 @@ the static splat (:func:`.runs.prepare`: reconstructed until converged, or per
 ``gt.json`` (core.geometry.metrics.match_joints). Prints per category: joints, type accuracy, AE
 mean/worst (deg), OE mean/worst (cm, revolute joints) before -> after, and wall and CPU seconds
 of optimisation per object; then the basin rate: from ``--basin`` starts per capture made from the
-ground truth with the axis turned by 10–30° and the line moved by 5–15 cm, the share of joints
-that end within 1° and 1 cm.
+ground truth with the axis turned by 10–30° and the line moved by 5–15 cm (every second one also
+of the wrong type, without states), the share of joints that end with the right type within 1°
+and 1 cm, overall and per kind of start.
 """
 
 from __future__ import annotations
@@ -44,9 +45,10 @@ def _scores(pred, gt) -> list[dict]:
              "ae": s.axis_error_deg, "oe": s.origin_error_cm} for s in match_joints(pred, gt)]
 
 
-def perturbed(joints, rng: np.random.Generator) -> list:
+def perturbed(joints, rng: np.random.Generator, wrong_type: bool = False) -> list:
     """Copies of ``joints`` with the axis turned by 10–30° and the line moved by 5–15 cm (their
-    states, the true ones, are kept)."""
+    states, the true ones, are kept); ``wrong_type``: also of the other type, without states or
+    limits (a hinge drawn as a slide: the optimisation must find the type and the states)."""
     out = []
     for j in joints:
         j = copy.deepcopy(j)
@@ -55,8 +57,15 @@ def perturbed(joints, rng: np.random.Generator) -> list:
         d = rng.normal(size=3)
         d -= (d @ j.axis) * j.axis
         j.origin = j.origin + rng.uniform(0.05, 0.15) * d / np.linalg.norm(d)
+        if wrong_type:
+            j.type = "prismatic" if j.type == "revolute" else "revolute"
+            j.states, j.limit = None, (0.0, 0.0)
         out.append(j)
     return out
+
+
+#: The kinds of perturbed starts of the basin runs, in turn.
+STARTS = ("perturbed", "wrong type")
 
 
 def optimised_joints(out: Path, capture: Capture, options: OptimiseOptions) -> list[Joint]:
@@ -86,10 +95,12 @@ def bench_capture(capture_dir: Path, work: Path, options: OptimiseOptions,
               "before": _scores(proposals.joints, gt.joints),
               "after": _scores(after, gt.joints), "basin": []}
     rng = np.random.default_rng([seed, len(capture_dir.name)])
-    for _ in range(basin):
-        start = perturbed(gt.joints, rng)
+    for i in range(basin):
+        kind = STARTS[i % len(STARTS)]
+        start = perturbed(gt.joints, rng, wrong_type=kind == "wrong type")
         write_articulation(out / layout.PROPOSALS, Articulation(start, {"source": "bench"}))
-        result["basin"] += _scores(optimised_joints(out, capture, options), gt.joints)
+        result["basin"] += [{**s, "start": kind}
+                            for s in _scores(optimised_joints(out, capture, options), gt.joints)]
     return result
 
 
@@ -112,9 +123,11 @@ def format_table(before: list[dict], after: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def basin_rate(results: list[dict], ae: float = 1.0, oe: float = 1.0) -> tuple[float, int]:
-    """Share of perturbed-start joints ending within ``ae`` degrees and ``oe`` cm, and their count."""
-    scores = [s for r in results for s in r["basin"]]
+def basin_rate(results: list[dict], ae: float = 1.0, oe: float = 1.0,
+               start: str | None = None) -> tuple[float, int]:
+    """Share of perturbed-start joints (of the ``start`` kind of :data:`STARTS`, or all) ending
+    with the right type within ``ae`` degrees and ``oe`` cm, and their count."""
+    scores = [s for r in results for s in r["basin"] if start in (None, s.get("start"))]
     ok = [s["type_ok"] and s["ae"] <= ae and (s["oe"] is None or s["oe"] <= oe) for s in scores]
     return (sum(ok) / len(ok) if ok else math.nan), len(ok)
 
@@ -170,8 +183,10 @@ def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
         print(format_table(before, after))
         rate, n = basin_rate(results)
         if n:
+            kinds = ", ".join(f"{k} {100 * r:.0f} % of {m}" for k in STARTS
+                              for r, m in [basin_rate(results, start=k)] if m)
             print(f"basin: {100 * rate:.0f} % of {n} joints from perturbed starts (10-30 deg, "
-                  f"5-15 cm) end within 1 deg and 1 cm")
+                  f"5-15 cm; {kinds}) end with the right type within 1 deg and 1 cm")
     if len(tables) > 1:
         print("\nafter optimisation, overall, against robot-free:")
         for v, _, after, _ in tables[1:]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from artgs.core.bench import check as bench_check
@@ -174,3 +175,28 @@ def test_benchmarks_default_to_the_reconstructed_splat():
     assert runs.splat_label(None) == "reconstructed until converged"
     assert runs.splat_label(0) == "depth-initialised"
     assert runs.splat_label(500) == "reconstructed for 500 iterations"
+
+
+def test_basin_starts_are_perturbed_and_of_the_wrong_type_in_turn():
+    """Perturbed starts turn the axis 10-30 deg and move the line 5-15 cm; the wrong-type ones
+    also flip the type and drop the states; the rate is given per kind of start."""
+    from artgs.core.bench.optimise import basin_rate, perturbed
+    from artgs.core.model.joints import Joint
+    truth = [Joint("door", "revolute", [0, 0, 1], [0.3, 0.2, 0.0], (0.0, 1.5),
+                   states={0: 0.0, 1: 1.0}),
+             Joint("drawer", "prismatic", [1, 0, 0], [0.0, 0.0, 0.5], (0.0, 0.3),
+                   states={0: 0.0, 1: 0.2})]
+    rng = np.random.default_rng(0)
+    for wrong in (False, True):
+        for j, t in zip(perturbed(truth, rng, wrong_type=wrong), truth):
+            turn = np.degrees(np.arccos(np.clip(j.axis @ t.axis, -1, 1)))
+            d = j.origin - t.origin
+            assert 10 - 1e-6 <= turn <= 30 + 1e-6
+            assert 0.05 - 1e-9 <= np.linalg.norm(d - (d @ j.axis) * j.axis) <= 0.15 + 1e-9
+            assert (j.type != t.type) == wrong and (j.states is None) == wrong
+    results = [{"basin": [{"type_ok": True, "ae": 0.5, "oe": 0.5, "start": "perturbed"},
+                          {"type_ok": False, "ae": 0.5, "oe": 0.5, "start": "wrong type"},
+                          {"type_ok": True, "ae": 0.2, "oe": None, "start": "wrong type"}]}]
+    assert basin_rate(results) == (2 / 3, 3)
+    assert basin_rate(results, start="perturbed") == (1.0, 1)
+    assert basin_rate(results, start="wrong type") == (0.5, 2)
