@@ -168,7 +168,8 @@ def test_a_dropped_joints_gaussians_go_to_the_base():
 
 def test_colours_seen_from_a_camera_are_the_splats_sh():
     """The colours evaluated once per camera (as degree-0 SH) render the canonical splat as
-    its own SH do; cached per camera centre."""
+    its own SH do; cached per camera centre. A part turned by its hinge shows the colours its
+    SH hold for the camera turned back by the hinge (the SH turn with the part)."""
     from artgs.core.render.rasterize import rasterize
     from artgs.core.model.cameras import Camera, look_at
     model = _small_model()
@@ -182,6 +183,20 @@ def test_colours_seen_from_a_camera_are_the_splats_sh():
     b = rasterize(s.means, s.quats, s.log_scales, s.opacity_logits, baked, K, w2c, 64, 48)
     assert float(a.alpha.max()) > 0.5
     np.testing.assert_allclose(b.rgb.numpy(), a.rgb.numpy(), atol=1e-5)
+    # a hinged part turned by 60 deg is seen as its canonical self from the camera turned back
+    model.harden()
+    model.states[0, 1] = np.radians(60.0)
+    view = type("V", (), {"w2c": w2c})()
+    R = rotation_about_axis(np.array([0.0, 0, 1]), np.radians(60.0))
+    back = R.T @ (np.array([0.4, -1.5, 0.3]))                  # joint 0's hinge: z through 0
+    w2c_back = torch.as_tensor(Camera(K, look_at(back, np.zeros(3)), 64, 48).w2c,
+                               dtype=torch.float32)
+    part = torch.as_tensor(model.labels() == 1)
+    seen = model.colours(view, 1)
+    np.testing.assert_allclose(seen[part].numpy(), s.colours_from(w2c_back)[part].numpy(),
+                               atol=1e-4)
+    assert torch.equal(seen[~part], baked[~part])
+    assert not np.allclose(seen[part].numpy(), baked[part].numpy(), atol=1e-3)
 
 
 # --- the stage -----------------------------------------------------------------------------------

@@ -179,6 +179,13 @@ class ArticulatedSplat:
         self.hard = self.logits.detach().argmax(-1)
 
     # --- posing and rendering ------------------------------------------------------------------
+    def members(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """:func:`.kinematics.part_members` of the hard labels (kept with them: they are
+        replaced, never changed in place)."""
+        if self._members[0] is not self.hard:
+            self._members = (self.hard, part_members(self.hard))
+        return self._members[1]
+
     def posed(self, ti: int) -> tuple[torch.Tensor, torch.Tensor]:
         s = self.splat
         if self.k == 0:
@@ -186,10 +193,7 @@ class ArticulatedSplat:
         R, t, q = joint_motions(self.types, self.joint_axes(), self.joint_origins(),
                                 self.values(ti))
         if self.hard is not None:
-            # the hard labels are replaced, never changed in place: their members keep with them
-            if self._members[0] is not self.hard:
-                self._members = (self.hard, part_members(self.hard))
-            return skin_rigid(s.means, s.quats, self.hard, R, t, q, self._members[1])
+            return skin_rigid(s.means, s.quats, self.hard, R, t, q, self.members())
         return skin(s.means, s.quats, self.weights(), R, t, q)
 
     def render(self, view, ti: int, backend: str = "auto"):
@@ -200,11 +204,32 @@ class ArticulatedSplat:
             c = self.cameras[self.camera_of[view.index]]
             means, quats = camera_motion(means, quats, view.w2c, c[:3], c[3:] * self.size)
         s = self.splat
-        g = Gaussians(means, quats, s.log_scales, s.opacity_logits, s.colours_from(view.w2c))
+        g = Gaussians(means, quats, s.log_scales, s.opacity_logits, self.colours(view, ti))
         if view.occluder is not None:
             g = concat(g, view.occluder)
         return rasterize(g.means, g.quats, g.log_scales, g.opacity_logits, g.sh, view.K, view.w2c,
                          view.width, view.height, None, backend)
+
+    @torch.no_grad()
+    def colours(self, view, ti: int) -> torch.Tensor:
+        """The Gaussians' colours in ``view`` at time index ``ti`` as degree-0 SH (N,1,3): the
+        canonical splat's from the camera (:meth:`Splat.colours_from`), and for a hardened
+        model each part's Gaussians along the view direction in the part's own frame (their SH
+        turn with the part: R⁻¹(posed − c) = μ − R⁻¹(c − t)). No gradient: the fit moves parts
+        by their geometry."""
+        s = self.splat
+        baked = s.colours_from(view.w2c)
+        if self.hard is None or self.k == 0 or s.sh.shape[1] == 1:
+            return baked
+        idx, part = self.members()
+        if not len(idx):
+            return baked
+        R, t, _ = joint_motions(self.types, self.joint_axes(), self.joint_origins(),
+                                self.values(ti))
+        centre = -view.w2c[:3, :3].T @ view.w2c[:3, 3]
+        local = torch.einsum("kji,kj->ki", R, centre - t)          # R_k^T (c - t_k)
+        rgb = eval_sh_colors(s.sh[idx], s.means[idx], local[part])
+        return baked.index_put((idx,), ((rgb - 0.5) / C0)[:, None, :])
 
     # --- regularisers --------------------------------------------------------------------------
     def skin_regularisers(self, sample: int = 2048) -> tuple[torch.Tensor, torch.Tensor]:
