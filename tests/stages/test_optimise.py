@@ -353,6 +353,51 @@ def test_spurious_part_removed(cabinet, tmp_path):
     assert labels.max() == 2
 
 
+def test_pieces_of_one_door_become_one_joint(cabinet, tmp_path):
+    """The door proposed as two pieces (its box cut in half, each half with the door's joint, as
+    the motion route proposes a fragmented front): one joint is left, on the door's line."""
+    gt = read_articulation(cabinet / "gt.json")
+    door = next(j for j in gt.joints if j.type == "revolute")
+    halves = []
+    for sign, name in ((1, "upper"), (-1, "lower")):
+        j = copy.deepcopy(door)
+        j.name, j.child = name, f"{name}_link"
+        axes, half = np.array(j.extent["axes"]), np.array(j.extent["half_size"], float)
+        a = int(np.argmax(half))
+        centre = np.array(j.extent["center"]) + sign * 0.5 * half[a] * axes[a]
+        half[a] *= 0.5
+        j.extent = {"center": centre.tolist(), "axes": axes.tolist(), "half_size": half.tolist()}
+        halves.append(j)
+    out = _out(tmp_path, cabinet, [j for j in gt.joints if j is not door] + halves)
+    figures = optimise(out, load_capture(cabinet), QUIET,
+                       OptimiseOptions(iterations=60, types=False, parts=True))
+    art = read_articulation(out / layout.ARTICULATION)
+    assert len(figures["merged"]) == 1 and set(figures["merged"][0]) == {"upper", "lower"}
+    assert len(art.joints) == 2 and art.meta["merged"] == figures["merged"], figures
+    hinge = next(j for j in art.joints if j.type == "revolute")
+    s = match_joints([hinge], [door])[0]
+    assert s.axis_error_deg < 2.0 and s.origin_error_cm < 2.0, s
+
+
+def test_same_joint_needs_alike_axes_lines_and_states():
+    """Joints are candidates for one only when type, axis, line and states agree."""
+    from artgs.core.stages.optimise.hypotheses import same_joint
+    model = _small_model(parts=2)          # two hinges on z, lines 10 cm apart (size 1 m)
+    model.states[:, 1] = 0.8
+    assert not same_joint(model, 0, 1)     # 10 cm > 5 % of the size
+    with torch.no_grad():
+        model.origins[1] = torch.tensor([0.03, 0.0, 0.4])   # 3 cm off, elsewhere on its line
+    assert same_joint(model, 0, 1)
+    model.states[1, 1] = 0.6
+    assert not same_joint(model, 0, 1)     # states 0.2 rad apart of 0.8
+    model.states[1, 1] = -0.8
+    with torch.no_grad():
+        model.axes[1] = torch.tensor([0.0, 0.05, -1.0])     # flipped axis (3 deg), flipped states
+    assert same_joint(model, 0, 1)
+    model.types[1] = "prismatic"
+    assert not same_joint(model, 0, 1)
+
+
 def test_missed_part_added(cabinet, tmp_path):
     """Only the drawer is proposed; the door the frames show opening becomes a new hinge."""
     gt = read_articulation(cabinet / "gt.json")

@@ -11,7 +11,8 @@ Steps (each fit is :func:`.fit.fit`):
    from the proposal or, where it has none, a search per time; each part trimmed to the
    Gaussians where the frames show it changing (:func:`.seen.trim_parts`);
 2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
-3. type by evidence, then spurious parts (:mod:`.hypotheses`);
+3. type by evidence, then spurious parts, then one joint for parts that move alike
+   (:mod:`.hypotheses`);
 4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
    each Gaussian to the part the frames' depth supports, kept if it lowers the loss
    (:mod:`.assign`); missed parts where the frames change and the model does not
@@ -185,6 +186,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
                  f"size {size:.3f} m")
 
     model.hard = torch.as_tensor(labels, device=dev)       # the boxes' parts, until step 4
+    user = {j.name for j in joints if j.source == "user"}
     start = (model.axes.cpu().numpy().copy(), model.origins.cpu().numpy().copy(),
              list(model.types), list(model.names))
     for k, j in enumerate(joints):
@@ -192,14 +194,21 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
             search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
     trimmed = seen.trim_parts(run, locked=model.locked.tolist()) if options.parts else {}
     run.run_fit(n, "joints", 0.25, coarse=cfg.coarse)
+
+    def fixed() -> list[bool]:
+        """Per current joint: a trusted user joint or a locked one."""
+        return [name in user or bool(lk) for name, lk in zip(model.names, model.locked.tolist())]
+
+    merged: list[list[str]] = []
+    if options.parts and model.k:   # pieces fitted alike before their types are chosen ...
+        merged = hypotheses.merge_duplicates(run, fixed())
     evidence: dict[str, dict[str, Any]] = {}
     if options.types and model.k:
-        evidence = hypotheses.select_types(run, share=0.35,
-                                           fixed=[j.source == "user" or is_locked(j)
-                                                  for j in joints])
+        evidence = hypotheses.select_types(run, share=0.35, fixed=fixed())
     removed: list[str] = []
-    if options.parts and model.k:
+    if options.parts and model.k:   # ... and after (a piece proposed as a slide, now a hinge)
         removed = hypotheses.remove_spurious(run, locked=model.locked.tolist())
+        merged += hypotheses.merge_duplicates(run, fixed())
     run.done = 0.6
     refine(run, n, share=0.24)
     assigned = assign.reassign(run, max(n // 4, 1), 0.04, model.locked.tolist()) \
@@ -229,8 +238,9 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     meta = {k: v for k, v in proposals.meta.items() if k != "optimised"}
     articulation = Articulation(result, {**meta, "optimised": True,
                                          "loss": float(losses.mean()), "removed": removed,
-                                         "added": added})
+                                         "merged": merged, "added": added})
     figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
+               "merged": merged,
                "trimmed": trimmed, "assigned": assigned,
                "cameras": camera_corrections(model),
                "kept_start": kept_start, "added": added, "depth": depth,
