@@ -11,7 +11,8 @@ Steps (each fit is :func:`.fit.fit`):
    from the proposal or, where it has none, a search per time; each part trimmed to the
    Gaussians where the frames show it changing (:func:`.seen.trim_parts`);
 2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
-3. type by evidence, then spurious parts, then one joint for parts that move alike
+3. one joint for parts that move alike (:func:`.hypotheses.merge_duplicates`; again after
+   the type choice and before the last steps), type by evidence, then spurious parts
    (:mod:`.hypotheses`);
 4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
    each Gaussian to the part the frames' depth supports, kept if it lowers the loss
@@ -224,6 +225,8 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
         removed += [name for name in again if name not in added]
         added = [name for name in added if name not in again]
+    if options.parts and model.k:   # ... and once more, fitted with their final parts
+        merged += hypotheses.merge_duplicates(run, fixed())
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
     losses = evaluate(model, frames, cfg)
