@@ -388,9 +388,8 @@ def remove_spurious(run, locked: list[bool]) -> list[str]:
             k += 1
     return removed
 
-#: Joints closer than this are candidates for one joint (axes within the angle, lines within
-#: the share of the object's size, states within the share of their range); the image loss
-#: decides (:func:`merge_duplicates`).
+#: Joints fitted this close are one joint (axes within the angle, lines within the share of
+#: the object's size, states within the share of their range): :func:`merge_duplicates`.
 SAME_AXIS_DEG = 5.0
 SAME_LINE = 0.05
 SAME_STATES = 0.1

@@ -10,7 +10,7 @@ pinned to 0 (the canonical splat is the closed object). Locked joints keep their
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -42,6 +42,8 @@ class Splat:
     log_scales: torch.Tensor
     opacity_logits: torch.Tensor
     sh: torch.Tensor
+    #: colours per camera centre (:meth:`colours_from`)
+    seen_from: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -51,15 +53,14 @@ class Splat:
         """The Gaussians' colours seen from the camera ``w2c`` (by their canonical means) as
         degree-0 SH (N,1,3), cached per camera centre. The optimisation moves parts, not
         colours: evaluating the SH once per fixed camera, not at every render, takes a fifth
-        of a render's cost and its gradients away. A moving part is seen along its canonical
-        direction (its SH are not turned with it either way)."""
+        of a render's cost and its gradients away (:meth:`ArticulatedSplat.colours` turns the
+        view direction into a moved part's frame)."""
         centre = -w2c[:3, :3].T @ w2c[:3, 3]
         key = tuple(round(float(x), 6) for x in centre)
-        cache = self.__dict__.setdefault("_colours", {})
-        if key not in cache:
+        if key not in self.seen_from:
             rgb = eval_sh_colors(self.sh, self.means, centre)
-            cache[key] = ((rgb - 0.5) / C0)[:, None, :].detach()
-        return cache[key]
+            self.seen_from[key] = ((rgb - 0.5) / C0)[:, None, :].detach()
+        return self.seen_from[key]
 
     @classmethod
     def from_arrays(cls, a, device: torch.device) -> "Splat":
