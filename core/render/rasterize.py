@@ -39,6 +39,11 @@ class RenderOutput(NamedTuple):
     alpha: torch.Tensor
 
 
+def camera_centre(w2c: torch.Tensor) -> torch.Tensor:
+    """The camera's centre in world coordinates from its world-to-camera matrix (4x4)."""
+    return -w2c[:3, :3].T @ w2c[:3, 3]
+
+
 def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
               opacity_logits: torch.Tensor, sh: torch.Tensor, K, w2c, width: int, height: int,
               background=None, backend: str = "auto", near: float = NEAR_PLANE,
@@ -65,8 +70,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor
         depth = torch.where(alpha > ALPHA_EPS, depth, torch.zeros_like(depth))
         return RenderOutput(rgb, depth, alpha)
 
-    cam_center = -w2c[:3, :3].T @ w2c[:3, 3]
-    colors = eval_sh_colors(sh, means, cam_center)
+    colors = eval_sh_colors(sh, means, camera_centre(w2c))
     if backend == "reference":
         proj = project(means, quats, log_scales, K, w2c, width, height, near, low_pass)
         with torch.no_grad():

@@ -32,7 +32,6 @@ import torch.nn.functional as F
 from ...render.sh import sh0_to_rgb
 from .changes import colour_of, region_of
 from .fit import evaluate
-from .kinematics import joint_motions
 from .model import ArticulatedSplat, restore, snapshot
 from .seen import project
 
@@ -60,8 +59,7 @@ def depth_votes(model: ArticulatedSplat, frames, cfg) -> tuple[torch.Tensor, tor
         outline = region_of(v)
         nearest = -F.max_pool2d(-torch.where(v.depth > 0, v.depth, torch.inf)[None, None], 3, 1,
                                 1)[0, 0]
-        R, t, _ = joint_motions(model.types, model.joint_axes(), model.joint_origins(),
-                                model.values(ti))
+        R, t, _ = model.motions(ti)
         for label in range(model.k + 1):
             p = means if label == 0 else means @ R[label - 1].T + t[label - 1]
             (px, py), z, seen = project(v, p)

@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from ...model.joints import Joint
 from ...render.gaussians import Gaussians, concat
-from ...render.rasterize import rasterize
+from ...render.rasterize import camera_centre, rasterize
 from ...render.sh import C0, eval_sh_colors
 from .kinematics import (PRISMATIC, REVOLUTE, joint_motions, part_members, quat_multiply, skew,
                          skin, skin_rigid)
@@ -55,7 +55,7 @@ class Splat:
         colours: evaluating the SH once per fixed camera, not at every render, takes a fifth
         of a render's cost and its gradients away (:meth:`ArticulatedSplat.colours` turns the
         view direction into a moved part's frame)."""
-        centre = -w2c[:3, :3].T @ w2c[:3, 3]
+        centre = camera_centre(w2c)
         key = tuple(round(float(x), 6) for x in centre)
         if key not in self.seen_from:
             rgb = eval_sh_colors(self.sh, self.means, centre)
@@ -187,12 +187,17 @@ class ArticulatedSplat:
             self._members = (self.hard, part_members(self.hard))
         return self._members[1]
 
-    def posed(self, ti: int) -> tuple[torch.Tensor, torch.Tensor]:
+    def motions(self, ti: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The joints' rigid motions at time index ``ti`` (:func:`.kinematics.joint_motions`)."""
+        return joint_motions(self.types, self.joint_axes(), self.joint_origins(), self.values(ti))
+
+    def posed(self, ti: int, motions: tuple | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Means and rotations of the Gaussians at time index ``ti`` (``motions``: the
+        joints' :meth:`motions` there, when the caller has them)."""
         s = self.splat
         if self.k == 0:
             return s.means, s.quats
-        R, t, q = joint_motions(self.types, self.joint_axes(), self.joint_origins(),
-                                self.values(ti))
+        R, t, q = self.motions(ti) if motions is None else motions
         if self.hard is not None:
             return skin_rigid(s.means, s.quats, self.hard, R, t, q, self.members())
         return skin(s.means, s.quats, self.weights(), R, t, q)
@@ -200,24 +205,26 @@ class ArticulatedSplat:
     def render(self, view, ti: int, backend: str = "auto"):
         """The posed splat at time index ``ti`` seen by ``view``, with the view's known occluder
         Gaussians (a robot twin) rendered in."""
-        means, quats = self.posed(ti)
+        motions = self.motions(ti) if self.k else None
+        means, quats = self.posed(ti, motions)
         if self.refine_cameras:
             c = self.cameras[self.camera_of[view.index]]
             means, quats = camera_motion(means, quats, view.w2c, c[:3], c[3:] * self.size)
         s = self.splat
-        g = Gaussians(means, quats, s.log_scales, s.opacity_logits, self.colours(view, ti))
+        g = Gaussians(means, quats, s.log_scales, s.opacity_logits,
+                      self.colours(view, ti, motions))
         if view.occluder is not None:
             g = concat(g, view.occluder)
         return rasterize(g.means, g.quats, g.log_scales, g.opacity_logits, g.sh, view.K, view.w2c,
                          view.width, view.height, None, backend)
 
     @torch.no_grad()
-    def colours(self, view, ti: int) -> torch.Tensor:
+    def colours(self, view, ti: int, motions: tuple | None = None) -> torch.Tensor:
         """The Gaussians' colours in ``view`` at time index ``ti`` as degree-0 SH (N,1,3): the
         canonical splat's from the camera (:meth:`Splat.colours_from`), and for a hardened
         model each part's Gaussians along the view direction in the part's own frame (their SH
         turn with the part: R⁻¹(posed − c) = μ − R⁻¹(c − t)). No gradient: the fit moves parts
-        by their geometry."""
+        by their geometry. ``motions``: the joints' :meth:`motions` at ``ti``, when known."""
         s = self.splat
         baked = s.colours_from(view.w2c)
         if self.hard is None or self.k == 0 or s.sh.shape[1] == 1:
@@ -225,10 +232,8 @@ class ArticulatedSplat:
         idx, part = self.members()
         if not len(idx):
             return baked
-        R, t, _ = joint_motions(self.types, self.joint_axes(), self.joint_origins(),
-                                self.values(ti))
-        centre = -view.w2c[:3, :3].T @ view.w2c[:3, 3]
-        local = torch.einsum("kji,kj->ki", R, centre - t)          # R_k^T (c - t_k)
+        R, t, _ = self.motions(ti) if motions is None else motions
+        local = torch.einsum("kji,kj->ki", R, camera_centre(view.w2c) - t)   # R_k^T (c - t_k)
         rgb = eval_sh_colors(s.sh[idx], s.means[idx], local[part])
         return baked.index_put((idx,), ((rgb - 0.5) / C0)[:, None, :])
 
