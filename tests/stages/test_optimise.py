@@ -541,6 +541,46 @@ def test_depth_refinement_sets_the_last_decimals(cabinet):
             assert s.origin_error_cm < 1.5, s
 
 
+def test_searched_states_follow_the_true_motion(cabinet):
+    """From zero states, the search (true joints and parts) puts every joint within one
+    candidate step of its true state at every time, with no jump away from both neighbours."""
+    from artgs.core.geometry.parts import assign_parts
+    from artgs.core.stages.optimise.fit import FitConfig, search_states
+    from artgs.core.stages.optimise.frames import interaction_frames
+    from artgs.core.stages.optimise.hypotheses import state_candidates
+    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
+    from artgs.core.stages.optimise.stage import object_size
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    arrays = initial_splats(capture.static)[0]
+    frames = interaction_frames(capture, torch.device("cpu"))
+    labels = assign_parts(arrays.means, gt)
+    bare = [copy.deepcopy(j) for j in gt]
+    for j in bare:
+        j.states = {}
+    model = ArticulatedSplat(Splat.from_arrays(arrays, torch.device("cpu")), bare, frames.times,
+                             labels, object_size(arrays.means), [False] * len(gt))
+    model.hard = torch.as_tensor(labels)
+    for k, true in enumerate(gt):
+        grid = state_candidates(model, k)
+        search_states(model, frames, k, FitConfig(), grid)
+        found = model.joint_values(k)
+        step = float(grid[1] - grid[0])
+        for t in frames.times:
+            assert abs(found[t] - true.states[t]) <= step, (true.name, t, found[t], true.states[t])
+
+
+def test_a_state_away_from_both_neighbours_is_cut():
+    """The search's median over time: an isolated jump goes, a monotone run and the ends stay,
+    a peak is cut to its larger neighbour."""
+    from artgs.core.stages.optimise.fit import median3
+    assert np.allclose(median3(np.array([0.0, 0.5, 0.0, 0.01, 0.02])), [0, 0, 0.01, 0.01, 0.02])
+    run = np.array([0.0, 0.1, 0.2, 0.3])
+    assert np.allclose(median3(run), run)
+    assert np.allclose(median3(np.array([0.0, 0.2, 0.4, 0.3, 0.2])), [0, 0.2, 0.3, 0.3, 0.2])
+
+
 def test_front_face_is_the_face_square_to_a_slide():
     """A drawer's part (front panel, handle, sides and back the splat may hold): the face square
     to its slide is the front panel alone; a door sliding in its own plane has no such face."""

@@ -156,12 +156,22 @@ def part_level(model: ArticulatedSplat, frames: FrameSet, k: int, min_pixels: in
     return level
 
 
+def score_level(frames: FrameSet) -> int:
+    """Pyramid level of hypothesis scoring and state search: half resolution (the coarsest can
+    be too small to see a part's motion, the finest too sharp to reward a part that is nearly
+    in place)."""
+    return min(1, len(frames.levels) - 1)
+
+
 @torch.no_grad()
 def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitConfig,
                   candidates: np.ndarray) -> None:
     """Set joint ``k``'s state at every moving time to the candidate value (rad / m) with the
-    lowest image loss at the coarsest level (others as they are)."""
-    level = len(frames.levels) - 1
+    lowest image loss (others as they are) at :func:`score_level` (at the coarsest level a small
+    part is lost in the blur and best moved anywhere: a PartNet dishwasher's front 7.7 cm out
+    was searched to 58 cm there), then each value the median of itself and its neighbours in
+    time (:func:`median3`)."""
+    level = score_level(frames)
     unit = model.unit_of(model.types[k])
     states = model.states.clone()
     for ti, t in enumerate(frames.times):
@@ -176,4 +186,17 @@ def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitCon
                 best, best_v = loss, float(v)
         states[k, ti] = best_v / unit
         model.states[k, ti] = states[k, ti]
+    at_rest = (states[k] * model.moving).cpu().numpy()       # time 0's value is 0
+    states[k] = torch.as_tensor(median3(at_rest), device=states.device)
     model.states = states
+
+
+def median3(values: np.ndarray) -> np.ndarray:
+    """Each value the median of itself and its neighbours (the first and last kept): a part moves continuously, so a searched state far from both its
+    neighbours is the part moved out of sight where the frame explains it poorly (a PartNet
+    dishwasher's front 51 cm out at the time it had moved 1.3 cm), not its motion. A monotone
+    run is kept as it is; a peak is cut to its larger neighbour, which the fit then recovers."""
+    out = values.copy()
+    if len(values) >= 3:
+        out[1:-1] = np.median(np.stack([values[:-2], values[1:-1], values[2:]]), axis=0)
+    return out

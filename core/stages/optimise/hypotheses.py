@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from .fit import evaluate, part_level, search_states
+from .fit import evaluate, part_level, score_level, search_states
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
 from .seen import seen_moving
@@ -238,11 +238,6 @@ def circle_centre(path: np.ndarray, basis: np.ndarray) -> np.ndarray | None:
     if not np.all(np.isfinite(sol)) or np.linalg.cond(A) > 1e8:
         return None
     return path.mean(0) + (-sol[:2] / 2) @ basis[:2]
-
-def score_level(frames) -> int:
-    """Pyramid level of hypothesis scoring: half resolution (the coarsest can be too small to
-    see a part's motion)."""
-    return min(1, len(frames.levels) - 1)
 
 @torch.no_grad()
 def score_at(model: ArticulatedSplat, frames, cfg, k: int, ti: int, values: np.ndarray) -> \
