@@ -6,7 +6,8 @@ the static splat (:func:`.runs.prepare`: reconstructed until converged, or per
 ``--iterations``), the motion route's proposals (core.stages.propose), then the optimisation
 (core.stages.optimise); both scored against
 ``gt.json`` (core.geometry.metrics.match_joints). Prints per category: joints, type accuracy, AE
-mean/worst (deg), OE mean/worst (cm, revolute joints) before -> after, and wall and CPU seconds
+mean/worst (deg), OE mean/worst (cm, revolute joints), extra joints (matched to no true one)
+before -> after, and wall and CPU seconds
 of optimisation per object; then the basin rate: from ``--basin`` starts per capture made from the
 ground truth with the axis turned by 10–30° and the line moved by 5–15 cm (every second one also
 of the wrong type, without states), the share of joints that end with the right type within 1°
@@ -43,6 +44,12 @@ from .sets import parse_set
 def _scores(pred, gt) -> list[dict]:
     return [{"joint": s.true_name, "pred": s.pred_name, "type_ok": s.type_correct,
              "ae": s.axis_error_deg, "oe": s.origin_error_cm} for s in match_joints(pred, gt)]
+
+
+def extra_joints(pred, scores: list[dict]) -> int:
+    """Predicted joints matched to no true joint (spurious parts a user would have to delete);
+    the AE/OE figures, one per true joint, do not see them."""
+    return len(pred) - len({s["pred"] for s in scores if s["pred"] is not None})
 
 
 def perturbed(joints, rng: np.random.Generator, wrong_type: bool = False) -> list:
@@ -90,10 +97,11 @@ def bench_capture(capture_dir: Path, work: Path, options: OptimiseOptions,
     after = optimised_joints(out, capture, options)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     category = gt.meta.get("category", capture_dir.name)
+    before, scored = _scores(proposals.joints, gt.joints), _scores(after, gt.joints)
     result = {"capture": capture_dir.name, "category": category, "seconds": seconds,
-              "cpu_seconds": cpu,
-              "before": _scores(proposals.joints, gt.joints),
-              "after": _scores(after, gt.joints), "basin": []}
+              "cpu_seconds": cpu, "before": before, "after": scored,
+              "extra_before": extra_joints(proposals.joints, before),
+              "extra_after": extra_joints(after, scored), "basin": []}
     rng = np.random.default_rng([seed, len(capture_dir.name)])
     for i in range(basin):
         kind = STARTS[i % len(STARTS)]
@@ -105,13 +113,14 @@ def bench_capture(capture_dir: Path, work: Path, options: OptimiseOptions,
 
 
 def format_table(before: list[dict], after: list[dict]) -> str:
-    """Per category: joints, type %, AE mean/worst, OE mean/worst before -> after, wall and CPU
-    seconds of optimisation per object (CPU: user + system time of the process, all threads;
-    comparable between a quiet and a loaded machine, where wall seconds are not)."""
+    """Per category: joints, type %, AE mean/worst, OE mean/worst, extra joints (matched to no
+    true joint: :func:`extra_joints`) before -> after, wall and CPU seconds of optimisation per
+    object (CPU: user + system time of the process, all threads; comparable between a quiet
+    and a loaded machine, where wall seconds are not)."""
     def f(v: float, p: int = 2) -> str:
         return "-" if math.isnan(v) else f"{v:.{p}f}"
     head = (f"{'category':<13}{'joints':>7}{'type %':>12}{'AE mean':>15}{'AE worst':>15}"
-            f"{'OE mean cm':>15}{'OE worst cm':>15}{'s/obj':>7}{'CPU s':>7}")
+            f"{'OE mean cm':>15}{'OE worst cm':>15}{'extra':>8}{'s/obj':>7}{'CPU s':>7}")
     lines = [head, "-" * len(head)]
     for b, a in zip(before, after):
         types = f"{100 * b['type_acc']:.0f}->{100 * a['type_acc']:.0f}"
@@ -119,6 +128,7 @@ def format_table(before: list[dict], after: list[dict]) -> str:
             f"{a['category']:<13}{a['joints']:>7}{types:>12}"
             f"{f(b['ae_mean']) + '->' + f(a['ae_mean']):>15}{f(b['ae_max']) + '->' + f(a['ae_max']):>15}"
             f"{f(b['oe_mean']) + '->' + f(a['oe_mean']):>15}{f(b['oe_max']) + '->' + f(a['oe_max']):>15}"
+            f"{str(b['extra']) + '->' + str(a['extra']):>8}"
             f"{a['seconds']:>7.1f}{a['cpu_seconds']:>7.1f}")
     return "\n".join(lines)
 
@@ -164,8 +174,10 @@ def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
             tmp, progress, "bench-optimise",
             lambda r: {"seconds": round(r["seconds"], 1),
                        "worst_ae": round(max((s["ae"] for s in r["after"]), default=0.0), 2)})
-    tables = [(v, summarize([{**r, "scores": r["before"]} for r in results]),
-               summarize([{**r, "scores": r["after"]} for r in results]), results)
+    tables = [(v, summarize([{**r, "scores": r["before"], "extra": r["extra_before"]}
+                             for r in results]),
+               summarize([{**r, "scores": r["after"], "extra": r["extra_after"]}
+                          for r in results]), results)
               for v, results in runs]
     if progress.mode == "json":
         _, before, after, results = tables[0]

@@ -46,7 +46,8 @@ def bench_capture(capture_dir: Path, work: Path, device: str = "auto",
 
 
 def summarize(results: list[dict]) -> list[dict]:
-    """Rows per category plus an ``overall`` row."""
+    """Rows per category plus an ``overall`` row (``extra``: the results' extra joints, where
+    they count them)."""
     rows = []
     cats = sorted({r["category"] for r in results})
     for name, group in [(c, [r for r in results if r["category"] == c]) for c in cats] + \
@@ -60,6 +61,7 @@ def summarize(results: list[dict]) -> list[dict]:
                      "ae_max": max(ae) if ae else math.nan,
                      "oe_mean": float(np.mean(oe)) if oe else math.nan,
                      "oe_max": max(oe) if oe else math.nan,
+                     "extra": sum(r.get("extra", 0) for r in group),
                      "seconds": float(np.mean([r["seconds"] for r in group])),
                      "cpu_seconds": float(np.mean([r.get("cpu_seconds", math.nan)
                                                    for r in group]))})

@@ -200,3 +200,23 @@ def test_basin_starts_are_perturbed_and_of_the_wrong_type_in_turn():
     assert basin_rate(results) == (2 / 3, 3)
     assert basin_rate(results, start="perturbed") == (1.0, 1)
     assert basin_rate(results, start="wrong type") == (0.5, 2)
+
+
+def test_extra_joints_are_the_predictions_no_true_joint_took():
+    """Two predictions for one door (a piece proposed twice) and a drawer never moved: one
+    extra; the table shows it per category, before -> after."""
+    from artgs.core.bench.optimise import _scores, extra_joints, format_table
+    from artgs.core.bench.propose import summarize
+    from artgs.core.model.joints import Joint
+    truth = [Joint("door", "revolute", [0, 0, 1], [0.3, 0.2, 0.0], (0.0, 1.5))]
+    pred = [Joint("a", "revolute", [0, 0, 1], [0.3, 0.2, 0.0], (0.0, 1.5)),
+            Joint("b", "prismatic", [1, 0, 0], [0.0, 0.0, 0.5], (0.0, 0.3))]
+    scores = _scores(pred, truth)
+    assert [s["pred"] for s in scores] == ["a"] and extra_joints(pred, scores) == 1
+    assert extra_joints(pred[:1], _scores(pred[:1], truth)) == 0
+    assert extra_joints([], _scores([], truth)) == 0
+    base = {"category": "door", "seconds": 1.0, "cpu_seconds": 1.0}
+    before = summarize([{**base, "scores": scores, "extra": 1}])
+    after = summarize([{**base, "scores": _scores(pred[:1], truth), "extra": 0}])
+    assert [r["extra"] for r in before] == [1, 1]
+    assert "1->0" in format_table(before, after).splitlines()[2]
