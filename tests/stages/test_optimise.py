@@ -571,6 +571,37 @@ def test_searched_states_follow_the_true_motion(cabinet):
             assert abs(found[t] - true.states[t]) <= step, (true.name, t, found[t], true.states[t])
 
 
+def test_key_time_is_never_the_closed_state(cabinet):
+    """Hypotheses are scored at the time the part at rest explains worst; time 0, where every
+    part is at rest, is never it, even when its frames are the worst explained (here: their
+    colours inverted, their depth 1.5 times too far)."""
+    from dataclasses import replace as swap
+    from artgs.core.geometry.parts import assign_parts
+    from artgs.core.stages.optimise.fit import FitConfig
+    from artgs.core.stages.optimise.frames import interaction_frames
+    from artgs.core.stages.optimise.hypotheses import key_time
+    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
+    from artgs.core.stages.optimise.stage import object_size
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    arrays = initial_splats(capture.static)[0]
+    frames = interaction_frames(capture, torch.device("cpu"))
+    for level in frames.levels:
+        for i, ti in enumerate(frames.time_index):
+            if frames.times[ti] == 0:
+                v = level[i]
+                level[i] = swap(v, rgb=1.0 - v.rgb, depth=v.depth * 1.5, rgb_full=None
+                                if v.rgb_full is None else 1.0 - v.rgb_full)
+    model = ArticulatedSplat(Splat.from_arrays(arrays, torch.device("cpu")), gt, frames.times,
+                             assign_parts(arrays.means, gt), object_size(arrays.means),
+                             [False] * len(gt))
+    for k, true in enumerate(gt):
+        key = key_time(model, frames, FitConfig(), k)
+        assert frames.times[key] != 0
+        assert abs(true.states[frames.times[key]]) > 0.5 * max(map(abs, true.states.values()))
+
+
 def test_a_state_away_from_both_neighbours_is_cut():
     """The search's median over time: an isolated jump goes, a monotone run and the ends stay,
     a peak is cut to its larger neighbour."""

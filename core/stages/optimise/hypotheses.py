@@ -88,10 +88,12 @@ def part_normal(model: ArticulatedSplat, k: int) -> np.ndarray:
     # principal direction of the normals (sign-free), as the eigenvector of their scatter
     return np.linalg.eigh(n.T @ n)[1][:, -1]
 
-def box_edges(pts: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The 12 edges of the part's PCA box (2–98 % percentiles) as (direction, point) lines."""
+def box_edges(pts: np.ndarray, axes: np.ndarray | None = None
+              ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The 12 edges of the part's box (2–98 % percentiles) as (direction, point) lines: along
+    the part's principal axes, or the rows of ``axes`` (3,3)."""
     c = pts.mean(0)
-    _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
+    vt = np.linalg.svd(pts - c, full_matrices=False)[2] if axes is None else axes
     local = (pts - c) @ vt.T
     lo, hi = np.percentile(local, 2, axis=0), np.percentile(local, 98, axis=0)
     lines = []
@@ -102,6 +104,15 @@ def box_edges(pts: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
                 p = c + sb * vt[b] + sd * vt[d] + 0.5 * (lo[a] + hi[a]) * vt[a]
                 lines.append((vt[a].copy(), p))
     return lines
+
+def hinge_lines(model: ArticulatedSplat, pts: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Candidate hinges of a part: the edges of its box along its own principal axes, and
+    along the object's (a round or square part, a washing machine's porthole door, has no
+    principal axes of its own: its box turns at random in its plane, while hinges run along
+    the body's edges)."""
+    means = model.splat.means.cpu().numpy().astype(float)
+    body = np.linalg.svd(means - means.mean(0), full_matrices=False)[2]
+    return box_edges(pts) + box_edges(pts, body)
 
 def revolute_from_motion(pts: np.ndarray, posed: np.ndarray, axis: np.ndarray, point: np.ndarray
                          ) -> tuple[np.ndarray, float]:
@@ -130,8 +141,9 @@ def hypotheses_of(model: ArticulatedSplat, k: int, kind: str, members: np.ndarra
 
     Prismatic: the principal direction of the part's fitted mean displacements (with its
     values), the part's mean surface normal (drawers slide along their front's normal), the
-    part box's and the object box's axes. Revolute: every edge of the part's box as a hinge,
-    with the per-time angles that best reproduce the fitted part positions.
+    part box's and the object box's axes. Revolute: every edge of the part's box as a hinge
+    (:func:`hinge_lines`), with the per-time angles that best reproduce the fitted part
+    positions.
     """
     pts = part_points(model, k, members=members)
     if len(pts) < 10:
@@ -150,7 +162,7 @@ def hypotheses_of(model: ArticulatedSplat, k: int, kind: str, members: np.ndarra
         return [(PRISMATIC, d, pts.mean(0), values if i == 0 else None)
                 for i, d in enumerate(directions)]
     hyps = []
-    for axis, point in box_edges(pts):
+    for axis, point in hinge_lines(model, pts):
         values, _ = revolute_from_motion(pts, posed, axis, point)
         if values[np.argmax(np.abs(values))] < 0:
             axis, values = -axis, -values
@@ -266,7 +278,9 @@ def moving_frames(model: ArticulatedSplat, frames, k: int) -> list[int]:
 @torch.no_grad()
 def key_time(model: ArticulatedSplat, frames, cfg, k: int) -> int:
     """The time index where joint ``k`` at rest (others as fitted) explains the frames worst:
-    where its part is furthest from closed, whatever the current hypothesis says."""
+    where its part is furthest from closed, whatever the current hypothesis says. Never time
+    0, where every joint is at rest: were it the worst explained (a realistic washing
+    machine's), every hypothesis would score alike there and the first would win."""
     from .fit import frame_loss
     level = score_level(frames)
     snap = snapshot(model)
@@ -276,9 +290,10 @@ def key_time(model: ArticulatedSplat, frames, cfg, k: int) -> int:
     for i, ti in enumerate(frames.time_index):
         per_time[ti] += float(frame_loss(model, frames, level, i, cfg))
     restore(model, snap)
+    per_time[model.moving.cpu().numpy() == 0] = -np.inf
     return int(np.argmax(per_time))
 
-def select_types(run, share: float, fixed: list[bool], tries: int = 16, prior: bool = True
+def select_types(run, share: float, fixed: list[bool], tries: int = 24, prior: bool = True
                  ) -> dict[str, dict[str, Any]]:
     """Keep, per joint, the type and line whose fit explains the frames where it moves best.
 

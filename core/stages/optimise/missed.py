@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from .fit import evaluate, part_level, search_states
-from .hypotheses import (REMOVE_TOL, box_edges, clearly_better, key_time, part_normal,
+from .hypotheses import (REMOVE_TOL, clearly_better, hinge_lines, key_time, part_normal,
                          part_points, score_at, state_candidates)
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
@@ -84,7 +84,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         k = model.add(name, REVOLUTE, np.array([0.0, 0.0, 1.0]), means[members].mean(0), members)
         run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
         pts = part_points(model, k)
-        hyps = [(REVOLUTE, a, p) for a, p in box_edges(pts)]
+        hyps = [(REVOLUTE, a, p) for a, p in hinge_lines(model, pts)]
         hyps += [(PRISMATIC, d, pts.mean(0)) for d in
                  [part_normal(model, k)] + list(np.linalg.svd(pts - pts.mean(0))[2])]
         key = key_time(model, frames, cfg, k)
