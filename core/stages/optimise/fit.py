@@ -192,10 +192,11 @@ def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitCon
 
 
 def median3(values: np.ndarray) -> np.ndarray:
-    """Each value the median of itself and its neighbours (the first and last kept): a part moves continuously, so a searched state far from both its
-    neighbours is the part moved out of sight where the frame explains it poorly (a PartNet
-    dishwasher's front 51 cm out at the time it had moved 1.3 cm), not its motion. A monotone
-    run is kept as it is; a peak is cut to its larger neighbour, which the fit then recovers."""
+    """Each value the median of itself and its neighbours (the first and last kept): a part
+    moves continuously, so a searched state far from both its neighbours is the part moved out
+    of sight where the frame explains it poorly (a PartNet dishwasher's front 51 cm out at the
+    time it had moved 1.3 cm), not its motion. A monotone run is kept as it is; a peak is cut
+    to its larger neighbour, which the fit then recovers."""
     out = values.copy()
     if len(values) >= 3:
         out[1:-1] = np.median(np.stack([values[:-2], values[1:-1], values[2:]]), axis=0)
