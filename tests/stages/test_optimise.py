@@ -602,6 +602,19 @@ def test_key_time_is_never_the_closed_state(cabinet):
         assert abs(true.states[frames.times[key]]) > 0.5 * max(map(abs, true.states.values()))
 
 
+def test_a_proposals_type_stays_unless_the_other_is_clearly_better():
+    """The other type's fit must lower the loss by more than the evaluation's resolution (0.1 %)
+    to replace a proposal's type; parts without a proposal take the lower loss."""
+    from artgs.core.stages.optimise.hypotheses import chosen
+    own = (np.array([1.0, 1.0]), "start", "prismatic", False)
+    restart = (np.array([0.999, 1.0]), "restart", "prismatic", True)
+    near = (np.array([0.9992, 0.999]), "hinge", "revolute", False)
+    far = (np.array([0.99, 0.99]), "hinge", "revolute", False)
+    assert chosen([own, restart, near], "prismatic", prior=True)[1] == "restart"
+    assert chosen([own, restart, near], "prismatic", prior=False)[1] == "hinge"
+    assert chosen([own, restart, far], "prismatic", prior=True)[1] == "hinge"
+
+
 def test_a_state_away_from_both_neighbours_is_cut():
     """The search's median over time: an isolated jump goes, a monotone run and the ends stay,
     a peak is cut to its larger neighbour."""

@@ -362,11 +362,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24, prior: b
             fitted.append((per_frame, snapshot(model), kind, kind == own))
             losses[kind] = min(losses.get(kind, np.inf), float(per_frame.mean()))
             restore(model, kept)
-        mine = min((f for f in fitted if f[2] == own), key=lambda f: f[0].mean())
-        best = min(fitted, key=lambda f: f[0].mean())
-        if prior and best[2] != own and not clearly_better(mine[0], best[0], []):
-            best = mine
-        _, snap, _, restarted = best
+        _, snap, _, restarted = chosen(fitted, own, prior)
         restore(model, snap)
         kind = model.types[k]
         lo, hi = min(losses.values()), max(losses.values())
@@ -377,6 +373,16 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24, prior: b
                          " (image loss " + ", ".join(f"{v:.4f} {t}" for t, v in losses.items())
                          + ")")
     return evidence
+
+def chosen(fitted: list[tuple], own: str, prior: bool) -> tuple:
+    """Of fits ``(per-frame losses, state, type, restarted)``, the one with the lowest mean loss;
+    with ``prior``, one of type ``own`` (the best of them) unless the other type's is clearly
+    better (:func:`clearly_better`)."""
+    best = min(fitted, key=lambda f: f[0].mean())
+    mine = min((f for f in fitted if f[2] == own), key=lambda f: f[0].mean())
+    if prior and best[2] != own and not clearly_better(mine[0], best[0], []):
+        return mine
+    return best
 
 def remove_spurious(run, locked: list[bool]) -> list[str]:
     """Remove the joints whose motion does not clearly explain the frames where the part moves
