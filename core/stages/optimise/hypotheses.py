@@ -331,8 +331,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24, prior: b
             run.done += share / len(todo)
             continue
         kept = snapshot(model)
-        here_frames = evaluate(model, frames, cfg, 0, ids)
-        here = float(here_frames.mean())
+        here = evaluate(model, frames, cfg, 0, ids)
         key = key_time(model, frames, cfg, k)
         best: dict[str, tuple] = {}
         for kind, options in hyps.items():
@@ -346,8 +345,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24, prior: b
                     best[kind] = (loss, axis, point)
                 restore(model, kept)
                 run.progress.check_cancel()
-        fitted = [(here_frames, kept, own, False)]     # (per-frame loss, state, type, restart)
-        losses = {own: here}
+        fitted = [(here, kept, own, False)]     # (per-frame loss, state, type, restart)
         for kind in (other, own):
             if kind not in best:
                 continue
@@ -360,8 +358,9 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24, prior: b
                         coarse_level=part_level(model, frames, k))
             per_frame = evaluate(model, frames, cfg, 0, ids)
             fitted.append((per_frame, snapshot(model), kind, kind == own))
-            losses[kind] = min(losses.get(kind, np.inf), float(per_frame.mean()))
             restore(model, kept)
+        losses = {t: min(float(f[0].mean()) for f in fitted if f[2] == t)
+                  for t in dict.fromkeys(f[2] for f in fitted)}
         _, snap, _, restarted = chosen(fitted, own, prior)
         restore(model, snap)
         kind = model.types[k]
