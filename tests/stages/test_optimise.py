@@ -652,6 +652,39 @@ def test_a_proposals_type_stays_unless_the_other_is_clearly_better():
     assert chosen([own, restart, far], "prismatic", prior=True)[1] == "hinge"
 
 
+def test_a_probe_prefers_the_hypothesis_that_fits_over_the_best_scored(cabinet):
+    """Of hypotheses ranked by one render, the probe starts the full fit from the one whose short
+    fit explains the moving frames best: here the door's hinge turned 60 deg ranked first, the
+    true hinge (perturbed 3 deg) second; the probe's start is the second."""
+    from artgs.core.geometry.parts import assign_parts
+    from artgs.core.stages.optimise.fit import FitConfig
+    from artgs.core.stages.optimise.frames import interaction_frames
+    from artgs.core.stages.optimise.hypotheses import moving_frames, probe
+    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat, restore
+    from artgs.core.stages.optimise.stage import Runner, object_size
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    k = next(i for i, j in enumerate(gt) if j.type == "revolute")
+    arrays = initial_splats(capture.static)[0]
+    dev = torch.device("cpu")
+    frames = interaction_frames(capture, dev)
+    labels = assign_parts(arrays.means, gt)
+    model = ArticulatedSplat(Splat.from_arrays(arrays, dev), gt, frames.times, labels,
+                             object_size(arrays.means), [False] * len(gt))
+    model.hard = torch.as_tensor(labels)
+    run = Runner(model, frames, FitConfig(), QUIET, OptimiseOptions(iterations=120),
+                 torch.zeros(len(gt)))
+    ids = moving_frames(model, frames, k)
+    wrong, near = _perturb(gt[k], 60, 0.0, seed=1), _perturb(gt[k], 3, 0.0, seed=2)
+    scored = [(0.1, wrong.axis, wrong.origin), (0.2, near.axis, near.origin)]
+    before = model.joint_axes().numpy().copy()
+    restore(model, probe(run, k, "revolute", scored, ids, "door", 0.0))
+    axis = model.joint_axes()[k].numpy()
+    assert np.degrees(np.arccos(min(1.0, abs(float(axis @ gt[k].axis))))) < 10
+    assert np.allclose(before[1 - k], model.joint_axes()[1 - k].numpy())
+
+
 def test_a_state_away_from_both_neighbours_is_cut():
     """The search's median over time: an isolated jump goes, a monotone run and the ends stay,
     a peak is cut to its larger neighbour."""
