@@ -685,6 +685,24 @@ def test_a_probe_prefers_the_hypothesis_that_fits_over_the_best_scored(cabinet):
     assert np.allclose(before[1 - k], model.joint_axes()[1 - k].numpy())
 
 
+def test_a_hinge_holds_its_part(cabinet):
+    """The door's true hinge passes along its part; the same hinge moved off the door by 40 %
+    of its size (a wide circle that mimics a slide) does not."""
+    from artgs.core.geometry.parts import assign_parts
+    from artgs.core.stages.optimise.plausible import off_part
+
+    gt = read_articulation(cabinet / "gt.json").joints
+    k = next(i for i, j in enumerate(gt) if j.type == "revolute")
+    means = initial_splats(load_capture(cabinet).static)[0].means.astype(float)
+    door = means[assign_parts(means, gt) == k + 1]
+    axis, origin = np.asarray(gt[k].axis), np.asarray(gt[k].origin)
+    assert not off_part(axis, origin, door)
+    out = door.mean(0) - origin
+    out -= (out @ axis) * axis
+    size = float(np.linalg.norm(np.ptp(door, axis=0)))
+    assert off_part(axis, origin - 0.4 * size * out / np.linalg.norm(out), door)
+
+
 def test_a_state_away_from_both_neighbours_is_cut():
     """The search's median over time: an isolated jump goes, a monotone run and the ends stay,
     a peak is cut to its larger neighbour."""

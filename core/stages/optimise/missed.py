@@ -7,8 +7,8 @@ import numpy as np
 import torch
 
 from .fit import evaluate, part_level, search_states
-from .hypotheses import (REMOVE_TOL, clearly_better, hinge_lines, key_time, part_normal,
-                         part_points, score_at, state_candidates)
+from .hypotheses import (REMOVE_TOL, clearly_better, hinge_lines, hinge_off_part, key_time,
+                         part_normal, part_points, score_at, state_candidates)
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
 from .plausible import little_motion
@@ -56,7 +56,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     and the part is kept only if it clearly lowers the image loss of the frames where it moves
     (:func:`clearly_better`) and moves visibly (not :func:`.plausible.little_motion`: a part
     that turns half the object by half a degree absorbs small registration errors, it is not a
-    part). A kept part explains
+    part) about a hinge on the part (:func:`.hypotheses.hinge_off_part`). A kept part explains
     its changes (and those of what it hid), so the changes are found again before the next of
     at most ``tries`` attempts; a rejected cluster is left out of the next ones (the frames
     may show another part moving beside a piece no joint explains). Returns the names of the
@@ -121,6 +121,10 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             unit = "rad" if model.types[k] == REVOLUTE else "m"
             run.progress.log(f"{name}: not added, it barely moves ({span:.3f} {unit}): an "
                              f"invented part must move visibly")
+        if gain and hinge_off_part(model, k):
+            gain = False
+            run.progress.log(f"{name}: not added, its hinge passes off the part (a wide circle "
+                             f"that mimics another motion)")
         if not gain:
             model.drop(k)
             run.trust = run.trust[:-1]
