@@ -543,30 +543,38 @@ def test_changes_point_at_the_moving_parts(cabinet, tmp_path):
     assert still[other].mean() > 0.3
 
 
+def _runner(capture, gt, joints, options: OptimiseOptions):
+    """The depth-initialised splat of ``capture`` and a Runner of ``joints`` on the true parts
+    of ``gt`` (hardened), with the default fit config."""
+    from artgs.core.geometry.parts import assign_parts
+    from artgs.core.stages.optimise.fit import FitConfig
+    from artgs.core.stages.optimise.frames import interaction_frames
+    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
+    from artgs.core.stages.optimise.stage import Runner, object_size
+
+    arrays = initial_splats(capture.static)[0]
+    dev = torch.device("cpu")
+    frames = interaction_frames(capture, dev)
+    labels = assign_parts(arrays.means, gt)
+    model = ArticulatedSplat(Splat.from_arrays(arrays, dev), joints, frames.times, labels,
+                             object_size(arrays.means), [False] * len(joints))
+    model.hard = torch.as_tensor(labels)
+    return arrays, Runner(model, frames, FitConfig(), QUIET, options, torch.zeros(len(joints)))
+
+
 def test_depth_refinement_sets_the_last_decimals(cabinet):
     """From joints 1.5 degrees and 1 cm off (true types, states and parts), the refinement on the
     frames' depth at least halves each axis error and is kept (the image loss is no worse); the
     drawer's slide is taken square to its front (under 0.1 degrees off). At this test's 64x48 a
     pixel is ~2 cm, so the hinge line itself stays ~1 cm off; at 160x120 the same start ends
     0.003 degrees off for the drawer (README, "Optimisation")."""
-    from artgs.core.geometry.parts import assign_parts
     from artgs.core.stages.optimise.depth_fit import refine_on_depth
-    from artgs.core.stages.optimise.fit import FitConfig
-    from artgs.core.stages.optimise.frames import interaction_frames
-    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
-    from artgs.core.stages.optimise.stage import Runner, object_size
 
     capture = load_capture(cabinet)
     gt = read_articulation(cabinet / "gt.json").joints
     start = [_perturb(j, 1.5, 0.01, seed=k) for k, j in enumerate(gt)]
-    arrays = initial_splats(capture.static)[0]
-    dev = torch.device("cpu")
-    frames = interaction_frames(capture, dev)
-    labels = assign_parts(arrays.means, gt)
-    model = ArticulatedSplat(Splat.from_arrays(arrays, dev), start, frames.times, labels,
-                             object_size(arrays.means), [False] * len(gt))
-    model.hard = torch.as_tensor(labels)
-    run = Runner(model, frames, FitConfig(), QUIET, OptimiseOptions(), torch.zeros(len(gt)))
+    arrays, run = _runner(capture, gt, start, OptimiseOptions())
+    model = run.model
     report = refine_on_depth(run, capture, arrays)
     assert sorted(report) == sorted(j.name for j in gt) and all(r["kept"] for r in report.values())
     axes, origins = model.joint_axes().numpy(), model.joint_origins().numpy()
@@ -656,26 +664,14 @@ def test_a_probe_prefers_the_hypothesis_that_fits_over_the_best_scored(cabinet):
     """Of hypotheses ranked by one render, the probe starts the full fit from the one whose short
     fit explains the moving frames best: here the door's hinge turned 60 deg ranked first, the
     true hinge (perturbed 3 deg) second; the probe's start is the second."""
-    from artgs.core.geometry.parts import assign_parts
-    from artgs.core.stages.optimise.fit import FitConfig
-    from artgs.core.stages.optimise.frames import interaction_frames
     from artgs.core.stages.optimise.hypotheses import moving_frames, probe
-    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat, restore
-    from artgs.core.stages.optimise.stage import Runner, object_size
+    from artgs.core.stages.optimise.model import restore
 
-    capture = load_capture(cabinet)
     gt = read_articulation(cabinet / "gt.json").joints
     k = next(i for i, j in enumerate(gt) if j.type == "revolute")
-    arrays = initial_splats(capture.static)[0]
-    dev = torch.device("cpu")
-    frames = interaction_frames(capture, dev)
-    labels = assign_parts(arrays.means, gt)
-    model = ArticulatedSplat(Splat.from_arrays(arrays, dev), gt, frames.times, labels,
-                             object_size(arrays.means), [False] * len(gt))
-    model.hard = torch.as_tensor(labels)
-    run = Runner(model, frames, FitConfig(), QUIET, OptimiseOptions(iterations=120),
-                 torch.zeros(len(gt)))
-    ids = moving_frames(model, frames, k)
+    _, run = _runner(load_capture(cabinet), gt, gt, OptimiseOptions(iterations=120))
+    model = run.model
+    ids = moving_frames(model, run.frames, k)
     wrong, near = _perturb(gt[k], 60, 0.0, seed=1), _perturb(gt[k], 3, 0.0, seed=2)
     scored = [(0.1, wrong.axis, wrong.origin), (0.2, near.axis, near.origin)]
     before = model.joint_axes().numpy().copy()
