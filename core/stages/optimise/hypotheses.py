@@ -2,10 +2,11 @@
 
 - Type: for each joint, hypotheses of the other type are made from its part (box edges as
   hinges, box axes as slides, and the fitted motion transferred), scored by rendering, the best
-  few probed by short fits, the best probe fitted, and the type with the lower image loss over the frames where the part moves is kept
-  (a proposal's type unless the other one is clearly better).
-- Spurious parts: a part whose removal (its Gaussians to the base) does not raise the image loss
-  over all frames is removed.
+  few probed by short fits, the best probe fitted (a hinge must hold its part), and the type
+  with the lower image loss over the frames where the part moves is kept (a proposal's type
+  unless the other one is clearly better).
+- Spurious parts: a part whose motion does not clearly explain the frames better than its part
+  at rest (merged into the base) or gone (transparent) is removed.
 - A joint whose start explains its frames no worse than the fit keeps the start's axis and point.
 
 Missed parts are added in :mod:`.missed`; what the frames show moving is found in :mod:`.seen`.
@@ -384,7 +385,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24, prior: b
     return evidence
 
 def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: str,
-          share: float) -> dict:
+          share: float) -> tuple:
     """The start of joint ``k``'s fit as ``kind``: of its ``PROBES`` best-scored hypotheses
     ``(loss, axis, point)``, each with its states searched and a short fit at the part's coarse
     level (only this joint free), the one then explaining the moving frames ``ids`` best, a
@@ -396,7 +397,7 @@ def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: st
     kept = snapshot(model)
     level = part_level(model, frames, k)
     steps = max(run.options.iterations // PROBE_DIVISOR, 1)
-    best: tuple[float, dict] | None = None
+    best: tuple[tuple[bool, float], tuple] | None = None     # ((off its part, loss), state)
     top = sorted(scored, key=lambda h: h[0])[:PROBES]
     for _, axis, point in top:
         model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
@@ -414,7 +415,8 @@ def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: st
     return best[1]
 
 def hinge_off_part(model: ArticulatedSplat, k: int) -> bool:
-    """Whether joint ``k`` is a hinge whose line passes off its part (:func:`.plausible.off_part`)."""
+    """Whether joint ``k`` is a hinge whose line passes off its part
+    (:func:`.plausible.off_part`)."""
     if model.types[k] != REVOLUTE:
         return False
     pts = model.splat.means[torch.as_tensor(model.labels() == k + 1, device=model.axes.device)]
