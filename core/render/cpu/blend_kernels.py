@@ -16,7 +16,6 @@ buffers (no atomics).
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -200,87 +199,94 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
 
 @kernel(parallel=True, fastmath=True)
 def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g_a, grads):
-    """Gradients w.r.t. ``feats`` summed into per-thread buffers ``grads`` (threads, M, 10)."""
+    """Gradients w.r.t. ``feats`` summed into buffers ``grads`` (B, M, NF), buffer b over a
+    fixed share of the tiles: a buffer per *thread* held whatever tiles that thread happened to
+    run, so the float sums' order, and the gradients' last bits, changed from run to run on a
+    busy machine (two optimisations on the same inputs ended 0.005 deg apart)."""
     tiles_x = (width + TILE_W - 1) // TILE_W
     tiles_y = (height + TILE_H - 1) // TILE_H
     stride = spread_stride(tiles_y)
-    for it in prange(tiles_x * tiles_y):
-        t = ((it // tiles_x) * stride) % tiles_y * tiles_x + it % tiles_x
-        buf = grads[numba.get_thread_id()]
-        i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
-        px = np.empty(NPIX, np.float32)
-        py = np.empty(NPIX, np.float32)
-        T = np.ones(NPIX, np.float32)
-        # per pixel: dL/d colour sum (3), dL/d depth sum, dL/d alpha * final transmittance
-        gpix = np.zeros((5, NPIX), np.float32)
-        rest = np.zeros((4, NPIX), np.float32)   # colour/depth of what lies behind, normalised
-        last = np.zeros(NPIX, np.int32)
-        start = offsets[t]
-        k_end = 0
-        for p in range(NPIX):
-            i, j = i0 + p // TILE_W, j0 + p % TILE_W
-            px[p], py[p] = f32(j + 0.5), f32(i + 0.5)
-            if i < height and j < width:
-                T[p] = _ONE - out_a[i, j]
-                gpix[0, p], gpix[1, p], gpix[2, p] = g_c[i, j, 0], g_c[i, j, 1], g_c[i, j, 2]
-                gpix[3, p], gpix[4, p] = g_d[i, j], g_a[i, j] * T[p]
-                last[p] = out_n[i, j]
-                k_end = max(k_end, out_n[i, j])
-        for kk in range(k_end - 1, -1, -1):
-            g = ids[start + kk]
-            mx, my, ca, cb, cc = feats[g, 0], feats[g, 1], feats[g, 2], feats[g, 3], feats[g, 4]
-            op, cr, cg, cbl, dep = feats[g, 5], feats[g, 6], feats[g, 7], feats[g, 8], feats[g, 9]
-            su, sv = feats[g, 10], feats[g, 11]
-            s_r = s_g = s_b = s_d = s_du = s_dv = s_h = s_x = s_y = s_xx = s_xy = s_yy = _ZERO
+    n = tiles_x * tiles_y
+    nb = grads.shape[0]
+    for b in prange(nb):     # buffer b always sums the same tiles, whichever thread runs it
+        buf = grads[b]
+        for it in range(b * n // nb, (b + 1) * n // nb):
+            t = ((it // tiles_x) * stride) % tiles_y * tiles_x + it % tiles_x
+            i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
+            px = np.empty(NPIX, np.float32)
+            py = np.empty(NPIX, np.float32)
+            T = np.ones(NPIX, np.float32)
+            # per pixel: dL/d colour sum (3), dL/d depth sum, dL/d alpha * final transmittance
+            gpix = np.zeros((5, NPIX), np.float32)
+            rest = np.zeros((4, NPIX), np.float32)   # colour/depth of what lies behind, normalised
+            last = np.zeros(NPIX, np.int32)
+            start = offsets[t]
+            k_end = 0
             for p in range(NPIX):
-                dx = px[p] - mx
-                dy = py[p] - my
-                power = _HALF * (ca * dx * dx + cc * dy * dy) + cb * dx * dy
-                gauss = exp_neg(power)
-                raw = op * gauss
-                alpha = min(ALPHA_MAX, raw)
-                valid = (kk < last[p]) & (power <= POWER_CUTOFF) & (alpha >= ALPHA_MIN)
-                inv = _ONE / (_ONE - alpha)
-                Tb = T[p] * inv
-                w = alpha * Tb if valid else _ZERO
-                gr, gg, gb, gd = gpix[0, p], gpix[1, p], gpix[2, p], gpix[3, p]
-                s_r += w * gr
-                s_g += w * gg
-                s_b += w * gb
-                wd = w * gd
-                s_d += wd
-                s_du += wd * dx
-                s_dv += wd * dy
-                dep_p = dep + su * dx + sv * dy
-                d_r, d_g, d_b = cr - rest[0, p], cg - rest[1, p], cbl - rest[2, p]
-                d_d = dep_p - rest[3, p]
-                g_alpha = Tb * (gr * d_r + gg * d_g + gb * d_b + gd * d_d) + gpix[4, p] * inv
-                # h = d alpha/d power * dL/d alpha / (-opacity); zero where alpha is clamped
-                h = gauss * g_alpha if valid & (raw <= ALPHA_MAX) else _ZERO
-                s_h += h
-                s_x += dx * h
-                s_y += dy * h
-                s_xx += dx * dx * h
-                s_xy += dx * dy * h
-                s_yy += dy * dy * h
-                a_v = alpha if valid else _ZERO
-                T[p] = Tb if valid else T[p]
-                rest[0, p] += a_v * d_r
-                rest[1, p] += a_v * d_g
-                rest[2, p] += a_v * d_b
-                rest[3, p] += a_v * d_d
-            buf[g, 0] += op * (ca * s_x + cb * s_y) - su * s_d
-            buf[g, 1] += op * (cb * s_x + cc * s_y) - sv * s_d
-            buf[g, 2] -= _HALF * op * s_xx
-            buf[g, 3] -= op * s_xy
-            buf[g, 4] -= _HALF * op * s_yy
-            buf[g, 5] += s_h
-            buf[g, 6] += s_r
-            buf[g, 7] += s_g
-            buf[g, 8] += s_b
-            buf[g, 9] += s_d
-            buf[g, 10] += s_du
-            buf[g, 11] += s_dv
+                i, j = i0 + p // TILE_W, j0 + p % TILE_W
+                px[p], py[p] = f32(j + 0.5), f32(i + 0.5)
+                if i < height and j < width:
+                    T[p] = _ONE - out_a[i, j]
+                    gpix[0, p], gpix[1, p], gpix[2, p] = g_c[i, j, 0], g_c[i, j, 1], g_c[i, j, 2]
+                    gpix[3, p], gpix[4, p] = g_d[i, j], g_a[i, j] * T[p]
+                    last[p] = out_n[i, j]
+                    k_end = max(k_end, out_n[i, j])
+            for kk in range(k_end - 1, -1, -1):
+                g = ids[start + kk]
+                mx, my, ca, cb, cc = feats[g, 0], feats[g, 1], feats[g, 2], feats[g, 3], feats[g, 4]
+                op, cr, cg, cbl = feats[g, 5], feats[g, 6], feats[g, 7], feats[g, 8]
+                dep = feats[g, 9]
+                su, sv = feats[g, 10], feats[g, 11]
+                s_r = s_g = s_b = s_d = s_du = s_dv = s_h = s_x = s_y = s_xx = s_xy = s_yy = _ZERO
+                for p in range(NPIX):
+                    dx = px[p] - mx
+                    dy = py[p] - my
+                    power = _HALF * (ca * dx * dx + cc * dy * dy) + cb * dx * dy
+                    gauss = exp_neg(power)
+                    raw = op * gauss
+                    alpha = min(ALPHA_MAX, raw)
+                    valid = (kk < last[p]) & (power <= POWER_CUTOFF) & (alpha >= ALPHA_MIN)
+                    inv = _ONE / (_ONE - alpha)
+                    Tb = T[p] * inv
+                    w = alpha * Tb if valid else _ZERO
+                    gr, gg, gb, gd = gpix[0, p], gpix[1, p], gpix[2, p], gpix[3, p]
+                    s_r += w * gr
+                    s_g += w * gg
+                    s_b += w * gb
+                    wd = w * gd
+                    s_d += wd
+                    s_du += wd * dx
+                    s_dv += wd * dy
+                    dep_p = dep + su * dx + sv * dy
+                    d_r, d_g, d_b = cr - rest[0, p], cg - rest[1, p], cbl - rest[2, p]
+                    d_d = dep_p - rest[3, p]
+                    g_alpha = Tb * (gr * d_r + gg * d_g + gb * d_b + gd * d_d) + gpix[4, p] * inv
+                    # h = d alpha/d power * dL/d alpha / (-opacity); zero where alpha is clamped
+                    h = gauss * g_alpha if valid & (raw <= ALPHA_MAX) else _ZERO
+                    s_h += h
+                    s_x += dx * h
+                    s_y += dy * h
+                    s_xx += dx * dx * h
+                    s_xy += dx * dy * h
+                    s_yy += dy * dy * h
+                    a_v = alpha if valid else _ZERO
+                    T[p] = Tb if valid else T[p]
+                    rest[0, p] += a_v * d_r
+                    rest[1, p] += a_v * d_g
+                    rest[2, p] += a_v * d_b
+                    rest[3, p] += a_v * d_d
+                buf[g, 0] += op * (ca * s_x + cb * s_y) - su * s_d
+                buf[g, 1] += op * (cb * s_x + cc * s_y) - sv * s_d
+                buf[g, 2] -= _HALF * op * s_xx
+                buf[g, 3] -= op * s_xy
+                buf[g, 4] -= _HALF * op * s_yy
+                buf[g, 5] += s_h
+                buf[g, 6] += s_r
+                buf[g, 7] += s_g
+                buf[g, 8] += s_b
+                buf[g, 9] += s_d
+                buf[g, 10] += s_du
+                buf[g, 11] += s_dv
 
 
 @kernel
