@@ -137,6 +137,14 @@ def bin_tiles(feats, extent, width, height):
     return offsets, ids
 
 
+@njit(inline="always")
+def tile_at(it, tiles_x, tiles_y, stride):
+    """The ``it``-th tile visited (rows spread by :func:`spread_stride`'s ``stride``): its index
+    and the row and column of its first pixel."""
+    t = ((it // tiles_x) * stride) % tiles_y * tiles_x + it % tiles_x
+    return t, (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
+
+
 @kernel(parallel=True, fastmath=True)
 def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n):
     """Front-to-back blend: colour sum (H,W,3), depth sum, alpha, and per pixel the number of
@@ -145,8 +153,7 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
     tiles_y = (height + TILE_H - 1) // TILE_H
     stride = spread_stride(tiles_y)
     for it in prange(tiles_x * tiles_y):
-        t = ((it // tiles_x) * stride) % tiles_y * tiles_x + it % tiles_x
-        i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
+        t, i0, j0 = tile_at(it, tiles_x, tiles_y, stride)
         px = np.empty(NPIX, np.float32)
         py = np.empty(NPIX, np.float32)
         T = np.empty(NPIX, np.float32)
@@ -211,8 +218,7 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
     for b in prange(nb):     # buffer b always sums the same tiles, whichever thread runs it
         buf = grads[b]
         for it in range(b * n // nb, (b + 1) * n // nb):
-            t = ((it // tiles_x) * stride) % tiles_y * tiles_x + it % tiles_x
-            i0, j0 = (t // tiles_x) * TILE_H, (t % tiles_x) * TILE_W
+            t, i0, j0 = tile_at(it, tiles_x, tiles_y, stride)
             px = np.empty(NPIX, np.float32)
             py = np.empty(NPIX, np.float32)
             T = np.ones(NPIX, np.float32)
