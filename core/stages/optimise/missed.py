@@ -11,7 +11,7 @@ from .hypotheses import (REMOVE_TOL, clearly_better, hinge_lines, hinge_off_part
                          part_normal, part_points, score_at, state_candidates)
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
-from .plausible import little_motion
+from .plausible import HIDDEN_SHARE, OpenSpace, into_body, little_motion
 from .seen import unexplained
 
 
@@ -51,16 +51,13 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     """Missed parts, one at a time: Gaussians of the base where the frames show changes the model
     does not (:func:`unexplained`), grouped into connected clusters (at least 1 % of the
     Gaussians), of which the part that starts moving first (:func:`first_mover`) becomes a part
-    hypothesis: hinges at its box edges and slides
-    along its normal and box axes are scored by rendering at its key time, the best is fitted,
-    and the part is kept only if it clearly lowers the image loss of the frames where it moves
-    (:func:`clearly_better`) and moves visibly (not :func:`.plausible.little_motion`: a part
-    that turns half the object by half a degree absorbs small registration errors, it is not a
-    part) about a hinge on the part (:func:`.hypotheses.hinge_off_part`). A kept part explains
-    its changes (and those of what it hid), so the changes are found again before the next of
-    at most ``tries`` attempts; a rejected cluster is left out of the next ones (the frames
-    may show another part moving beside a piece no joint explains). Returns the names of the
-    added joints."""
+    hypothesis: hinges at its box edges and slides along its normal and box axes are scored by
+    rendering at its key time, the best is fitted, and the part is kept only if it clearly
+    lowers the image loss of the frames where it moves (:func:`clearly_better`) and its motion
+    is plausible (:func:`implausible`). A kept part explains its changes (and those of what it
+    hid), so the changes are found again before the next of at most ``tries`` attempts; a
+    rejected cluster is left out of the next ones (the frames may show another part moving
+    beside a piece no joint explains). Returns the names of the added joints."""
     model, frames, cfg = run.model, run.frames, run.cfg
     means = model.splat.means.cpu().numpy().astype(float)
     added: list[str] = []
@@ -115,16 +112,10 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         run.progress.log(f"{name}: {len(g)} Gaussians where the frames change and the model "
                          f"does not; as a {kind} part the image loss is {after:.5f} "
                          f"(without {before:.5f})")
-        span = float(np.ptp([0.0, *model.joint_values(k).values()]))
-        if gain and little_motion(model.types[k], span, model.size):
+        why = implausible(model, k, run.space) if gain else None
+        if why:
             gain = False
-            unit = "rad" if model.types[k] == REVOLUTE else "m"
-            run.progress.log(f"{name}: not added, it barely moves ({span:.3f} {unit}): an "
-                             f"invented part must move visibly")
-        if gain and hinge_off_part(model, k):
-            gain = False
-            run.progress.log(f"{name}: not added, its hinge passes off the part (a wide circle "
-                             f"that mimics another motion)")
+            run.progress.log(f"{name}: not added, {why}")
         if not gain:
             model.drop(k)
             run.trust = run.trust[:-1]
@@ -142,6 +133,29 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         run.trust = run.trust[:-1]
         restore(model, (fitted[0][:-1], fitted[1][:-1], fitted[2][:-1], fitted[3][:-1]))
     return added
+
+def implausible(model: ArticulatedSplat, k: int, space: OpenSpace | None) -> str | None:
+    """Why fitted joint ``k`` is no part to invent, or None: it barely moves
+    (:func:`.plausible.little_motion`: a part that turns half the object by half a degree
+    absorbs small registration errors), its hinge passes off its part
+    (:func:`.hypotheses.hinge_off_part`: a wide circle mimics another motion), or it moves into
+    the body, behind what the static views measured (:func:`.plausible.into_body` in ``space``:
+    a piece of noise turned into the object vanishes there)."""
+    kind = model.types[k]
+    values = np.array(list(model.joint_values(k).values()))
+    span = float(np.ptp([0.0, *values]))
+    if little_motion(kind, span, model.size):
+        unit = "rad" if kind == REVOLUTE else "m"
+        return f"it barely moves ({span:.3f} {unit}): an invented part must move visibly"
+    if hinge_off_part(model, k):
+        return "its hinge passes off the part (a wide circle that mimics another motion)"
+    inside = into_body(space, kind, model.joint_axes()[k].detach().cpu().numpy(),
+                       model.joint_origins()[k].detach().cpu().numpy(), values,
+                       part_points(model, k))
+    if inside > HIDDEN_SHARE:
+        return (f"it moves into the body ({100 * inside:.0f} % of its surface goes behind what "
+                f"the static views measured)")
+    return None
 
 @torch.no_grad()
 def merge_target(model: ArticulatedSplat, frames, cfg, k: int, loss: float) -> int | None:
