@@ -451,6 +451,25 @@ def test_missed_part_added(cabinet, tmp_path):
     assert abs(max(new.states.values()) - door.limit[1]) < 0.2
 
 
+def test_first_mover_splits_by_onset_and_keeps_a_spread_group_whole():
+    """Two touching panels that start moving 4 steps apart are split (the earlier, as the two
+    are equally common); a panel whose points start over six steps, so that no window of
+    onsets holds ``min_size`` of them, is taken whole (it used to give nothing)."""
+    from artgs.core.stages.optimise.missed import first_mover
+
+    def panel(x0: float) -> np.ndarray:
+        xs, ys = np.meshgrid(np.linspace(x0, x0 + 0.3, 15), np.linspace(0.0, 0.5, 20))
+        return np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1)
+
+    a, b = panel(0.0), panel(0.32)
+    onset = np.repeat([1, 5], len(a))
+    got = first_mover(np.concatenate([a, b]), onset, 100)
+    assert got is not None and set(got.tolist()) == set(range(len(a)))
+    spread = np.random.default_rng(0).integers(1, 7, len(a))
+    got = first_mover(a, spread, int(0.9 * len(a)))
+    assert got is not None and len(got) == len(a)
+
+
 def test_true_joints_gain_no_part(cabinet, tmp_path):
     """Given the true joints, the missed-part search invents nothing and no part is removed: the
     frames' unexplained pixels (an inside the closed splat lacks, small registration errors) are

@@ -34,30 +34,40 @@ def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
 
 def first_mover(points: np.ndarray, onset: np.ndarray, min_size: int, link: int = 2
                 ) -> np.ndarray | None:
-    """Of changed points (N,3) with the time step each started to change, the part that moves
-    first in the largest group: the group's most common onset within ``link`` steps, its largest
-    connected piece (parts side by side that move at different times are split; what a moving
-    part hid or uncovered starts with it and stays). Index array, or None."""
+    """Of changed points (N,3) with the time step each started to change, one part of the
+    largest group: the group's points whose onset lies within ``link`` steps of its most common
+    onset, their largest connected piece (parts side by side that move at different times are
+    split; what a moving part hid or uncovered starts with it and stays). When that gives no
+    piece of ``min_size``, the next most common onset is tried, and the whole group is the part
+    when none does: a door that swings slowly changes its pixels over many steps (a PartNet
+    glass door's onsets spread over six steps, and its most common one split it into pieces
+    too small to fit). Index array, or None without a group."""
     groups = clusters(points, min_size)
     if not groups:
         return None
     g = groups[0]
-    mode = int(np.bincount(onset[g]).argmax())
-    sub = g[np.abs(onset[g] - mode) <= link]
-    pieces = clusters(points[sub], min_size)
-    return sub[pieces[0]] if pieces else None
+    counts = np.bincount(onset[g])
+    for mode in np.argsort(-counts, kind="stable"):
+        if not counts[mode]:
+            break
+        sub = g[np.abs(onset[g] - mode) <= link]
+        pieces = clusters(points[sub], min_size)
+        if pieces:
+            return sub[pieces[0]]
+    return g
 
 def add_missed(run, share: float, tries: int = 3) -> list[str]:
     """Missed parts, one at a time: Gaussians of the base where the frames show changes the model
     does not (:func:`unexplained`), grouped into connected clusters (at least 1 % of the
     Gaussians), of which the part that starts moving first (:func:`first_mover`) becomes a part
     hypothesis: hinges at its box edges and slides along its normal and box axes are scored by
-    rendering at its key time, the best is fitted, and the part is kept only if it clearly
-    lowers the image loss of the frames where it moves (:func:`clearly_better`) and its motion
-    is plausible (:func:`implausible`). A kept part explains its changes (and those of what it
-    hid), so the changes are found again before the next of at most ``tries`` attempts; a
-    rejected cluster is left out of the next ones (the frames may show another part moving
-    beside a piece no joint explains). Returns the names of the added joints."""
+    rendering at its key time, the best is fitted (then, if needed, the best of the other
+    type), and the part is kept only if it clearly lowers the image loss of the frames where it
+    moves (:func:`clearly_better`) and its motion is plausible (:func:`implausible`). A kept
+    part explains its changes (and those of what it hid), so the changes are found again before
+    the next of at most ``tries`` attempts; a rejected cluster is left out of the next ones (the
+    frames may show another part moving beside a piece no joint explains). Returns the names of
+    the added joints."""
     model, frames, cfg = run.model, run.frames, run.cfg
     means = model.splat.means.cpu().numpy().astype(float)
     added: list[str] = []
@@ -91,8 +101,9 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             scored.append((score_at(model, frames, cfg, k, key, state_candidates(model, k))[0],
                            kind, axis, point))
             run.progress.check_cancel()
-        # the best-scoring hypothesis is fitted; if it does not explain the frames better, the
-        # best of the other type is (a small part's score at one time can mislead)
+        # the best-scoring hypothesis is fitted; if it does not explain the frames better or
+        # moves implausibly, the best of the other type is (a small part's score at one time
+        # can mislead)
         order = sorted(scored, key=lambda s: s[0])
         first = order[0][1]
         second = [s for s in order if s[1] != first][:1]
@@ -107,15 +118,15 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             # a part the optimisation invents has only the loss it lowers as evidence: over
             # all frames, not on the frames it picks itself (the local test is for proposals)
             gain = clearly_better(before_frames, after_frames, [])
+            run.progress.log(f"{name}: {len(g)} Gaussians where the frames change and the "
+                             f"model does not; as a {kind} part the image loss is {after:.5f} "
+                             f"(without {before:.5f})")
+            why = implausible(model, k, run.space) if gain else None
+            if why:
+                gain = False
+                run.progress.log(f"{name}: not added as a {kind} part, {why}")
             if gain:
                 break
-        run.progress.log(f"{name}: {len(g)} Gaussians where the frames change and the model "
-                         f"does not; as a {kind} part the image loss is {after:.5f} "
-                         f"(without {before:.5f})")
-        why = implausible(model, k, run.space) if gain else None
-        if why:
-            gain = False
-            run.progress.log(f"{name}: not added, {why}")
         if not gain:
             model.drop(k)
             run.trust = run.trust[:-1]
