@@ -7,11 +7,11 @@ import numpy as np
 import torch
 
 from .fit import evaluate, part_level, search_states
-from .hypotheses import (REMOVE_TOL, clearly_better, hinge_lines, hinge_off_part, key_time,
-                         part_normal, part_points, score_at, state_candidates)
+from .hypotheses import (REMOVE_TOL, clearly_better, hinge_lines, key_time, part_normal,
+                         part_points, score_at, state_candidates)
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
-from .plausible import HIDDEN_SHARE, OpenSpace, into_body, little_motion
+from .plausible import HIDDEN_SHARE, OpenSpace, into_body, little_motion, off_part
 from .seen import unexplained
 
 
@@ -149,7 +149,7 @@ def implausible(model: ArticulatedSplat, k: int, space: OpenSpace | None) -> str
     """Why fitted joint ``k`` is no part to invent, or None: it barely moves
     (:func:`.plausible.little_motion`: a part that turns half the object by half a degree
     absorbs small registration errors), its hinge passes off its part
-    (:func:`.hypotheses.hinge_off_part`: a wide circle mimics another motion), or it moves into
+    (:func:`hinge_off_part`: a wide circle mimics another motion), or it moves into
     the body, behind what the static views measured (:func:`.plausible.into_body` in ``space``:
     a piece of noise turned into the object vanishes there)."""
     kind = model.types[k]
@@ -167,6 +167,16 @@ def implausible(model: ArticulatedSplat, k: int, space: OpenSpace | None) -> str
         return (f"it moves into the body ({100 * inside:.0f} % of its surface goes behind what "
                 f"the static views measured)")
     return None
+
+def hinge_off_part(model: ArticulatedSplat, k: int) -> bool:
+    """Whether joint ``k`` is a hinge whose line passes off its part
+    (:func:`.plausible.off_part`)."""
+    if model.types[k] != REVOLUTE:
+        return False
+    pts = model.splat.means[torch.as_tensor(model.labels() == k + 1, device=model.axes.device)]
+    return off_part(model.joint_axes()[k].detach().cpu().numpy().astype(float),
+                    model.joint_origins()[k].detach().cpu().numpy().astype(float),
+                    pts.cpu().numpy().astype(float))
 
 @torch.no_grad()
 def merge_target(model: ArticulatedSplat, frames, cfg, k: int, loss: float) -> int | None:
