@@ -96,8 +96,6 @@ class Runner:
         self.share = 0.0
         #: per joint name, the proposal's joint of the other type (hypotheses.alternative_of)
         self.alternatives: dict[str, list] = {}
-        #: the static views' depth, asked where a moved part lands (None without depth)
-        self.space: OpenSpace | None = None
 
     def run_fit(self, steps: int, phase: str, share: float, **kw: Any) -> float:
         """A fit that reports progress for ``share`` of the stage."""
@@ -183,7 +181,6 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         model.use_cameras(frames.camera)
     run = Runner(model, frames, cfg, progress, options, trust)
     run.alternatives = {j.name: hypotheses.alternative_of(j, frames.times) for j in joints}
-    run.space = open_space(capture.static, size)
     n = options.iterations
     progress.log(f"optimise: {len(joints)} joint(s), {splat.n} Gaussians, "
                  f"{len(frames.time_index)} frames at {len(frames.times)} times, "
@@ -233,7 +230,8 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
     losses = evaluate(model, frames, cfg)
-    result = export(model, frames, joints, losses, evidence, cfg, run.space, depth)
+    result = export(model, frames, joints, losses, evidence, cfg,
+                    open_space(capture.static, size), depth)
     if not result:
         raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
                            f"frames and the frames show no part moving that the model does not "
