@@ -581,6 +581,27 @@ def _runner(capture, gt, joints, options: OptimiseOptions):
     return arrays, Runner(model, frames, FitConfig(), QUIET, options, torch.zeros(len(joints)))
 
 
+def test_an_invented_part_that_moves_into_the_body_is_dropped(cabinet):
+    """Of the invented parts (here the true ones, with true states), the one whose states are
+    turned the other way (the drawer pushed into the cabinet) is dropped; the others stay."""
+    from artgs.core.stages.optimise.missed import drop_into_body
+    from artgs.core.stages.optimise.plausible import open_space
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    _, run = _runner(capture, gt, gt, OptimiseOptions())
+    model = run.model
+    drawer = next(j.name for j in gt if j.type == "prismatic")
+    space = open_space(capture.static, model.size)
+    assert drop_into_body(run, list(model.names), space) == []
+    with torch.no_grad():
+        model.states = model.states.clone()
+        model.states[model.names.index(drawer)] *= -1
+    assert drop_into_body(run, list(model.names), space) == [drawer]
+    assert sorted(model.names) == sorted(j.name for j in gt if j.name != drawer)
+    assert len(run.trust) == model.k
+
+
 def test_depth_refinement_sets_the_last_decimals(cabinet):
     """From joints 1.5 degrees and 1 cm off (true types, states and parts), the refinement on the
     frames' depth at least halves each axis error and is kept (the image loss is no worse); the

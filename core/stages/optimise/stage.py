@@ -18,7 +18,8 @@ Steps (each fit is :func:`.fit.fit`):
    each Gaussian to the part the frames' depth supports, kept if it lowers the loss
    (:mod:`.assign`); missed parts where the frames change and the model does not
    (:func:`.missed.add_missed`),
-   then, if any was added, step 4's fits again (at half length) and the spurious-part test;
+   then, if any was added, step 4's fits again (at half length), the spurious-part test and,
+   for the added parts, the into-body test (:func:`.missed.drop_into_body`);
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
    each joint refined last on the frames' depth (:mod:`.depth_fit`);
 5. report per joint residual, observed range and confidence.
@@ -180,6 +181,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if options.cameras:
         model.use_cameras(frames.camera)
     run = Runner(model, frames, cfg, progress, options, trust)
+    space = open_space(capture.static, size)
     run.alternatives = {j.name: hypotheses.alternative_of(j, frames.times) for j in joints}
     n = options.iterations
     progress.log(f"optimise: {len(joints)} joint(s), {splat.n} Gaussians, "
@@ -223,6 +225,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if added:                     # the new parts refined with the others, then tested again
         refine(run, n // 2, share=0.07)
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
+        again += missed.drop_into_body(run, [n for n in added if n not in again], space)
         removed += [name for name in again if name not in added]
         added = [name for name in added if name not in again]
     if options.parts and model.k:   # ... and once more, fitted with their final parts
@@ -230,8 +233,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
     losses = evaluate(model, frames, cfg)
-    result = export(model, frames, joints, losses, evidence, cfg,
-                    open_space(capture.static, size), depth)
+    result = export(model, frames, joints, losses, evidence, cfg, space, depth)
     if not result:
         raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
                            f"frames and the frames show no part moving that the model does not "
