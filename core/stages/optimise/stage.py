@@ -225,7 +225,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if added:                     # the new parts refined with the others, then tested again
         refine(run, n // 2, share=0.07)
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
-        again += missed.drop_into_body(run, [n for n in added if n not in again], space)
+        again += missed.drop_into_body(run, [a for a in added if a not in again], space)
         removed += [name for name in again if name not in added]
         added = [name for name in added if name not in again]
     if options.parts and model.k:   # ... and once more, fitted with their final parts
