@@ -167,10 +167,9 @@ def hinge_off_part(model: ArticulatedSplat, k: int) -> bool:
     (:func:`.plausible.off_part`)."""
     if model.types[k] != REVOLUTE:
         return False
-    pts = model.splat.means[torch.as_tensor(model.labels() == k + 1, device=model.axes.device)]
     return off_part(model.joint_axes()[k].detach().cpu().numpy().astype(float),
                     model.joint_origins()[k].detach().cpu().numpy().astype(float),
-                    pts.cpu().numpy().astype(float))
+                    part_points(model, k, limit=model.splat.n))
 
 @torch.no_grad()
 def merge_target(model: ArticulatedSplat, frames, cfg, k: int, loss: float) -> int | None:
@@ -206,13 +205,11 @@ def drop_into_body(run, names: list[str], space: OpenSpace | None) -> list[str]:
     dropped = []
     for name in names:
         k = model.names.index(name)
-        pts = model.splat.means[torch.as_tensor(model.labels() == k + 1,
-                                                device=model.axes.device)]
         share = into_body(space, model.types[k],
                           model.joint_axes()[k].detach().cpu().numpy().astype(float),
                           model.joint_origins()[k].detach().cpu().numpy().astype(float),
                           np.array(list(model.joint_values(k).values())),
-                          pts.cpu().numpy().astype(float))
+                          part_points(model, k, limit=model.splat.n))
         if share > HIDDEN_SHARE:
             run.progress.log(f"{name}: dropped, its fit moves {100 * share:.0f} % of its part "
                              f"into the body (behind what the static views measured)")
