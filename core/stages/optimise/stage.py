@@ -217,6 +217,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     assigned = assign.reassign(run, max(n // 4, 1), 0.04, model.locked.tolist()) \
         if options.assign and model.k else {}
     added: list[str] = []
+    rejected: list[str] = []      # invented, then dropped by the final tests
     if options.parts:
         added = missed.add_missed(run, share=0.05)
     if added and options.types:   # the new parts' types by the same evidence
@@ -227,6 +228,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
         again += missed.drop_into_body(run, [a for a in added if a not in again], space)
         removed += [name for name in again if name not in added]
+        rejected = [name for name in added if name in again]
         added = [name for name in added if name not in again]
     if options.parts and model.k:   # ... and once more, fitted with their final parts
         merged += hypotheses.merge_duplicates(run, fixed())
@@ -243,12 +245,14 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     meta = {k: v for k, v in proposals.meta.items() if k != "optimised"}
     articulation = Articulation(result, {**meta, "optimised": True,
                                          "loss": float(losses.mean()), "removed": removed,
-                                         "merged": merged, "added": added})
+                                         "merged": merged, "added": added,
+                                         "rejected": rejected})
     figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
                "merged": merged,
                "trimmed": trimmed, "assigned": assigned,
                "cameras": camera_corrections(model),
-               "kept_start": kept_start, "added": added, "depth": depth,
+               "kept_start": kept_start, "added": added, "rejected": rejected,
+               "depth": depth,
                "types": [j.type for j in result],
                "seconds": round(time.perf_counter() - t0, 2)}
     write_labels(out / layout.PART_LABELS, model.labels())
