@@ -474,15 +474,18 @@ def test_true_joints_gain_no_part(cabinet, tmp_path):
     """Given the true joints, the missed-part search invents nothing and no part is removed: the
     frames' unexplained pixels (an inside the closed splat lacks, small registration errors) are
     not a part, and a part the search makes must move visibly."""
-    from artgs.core.stages.optimise.plausible import little_motion
+    from artgs.core.stages.optimise.plausible import little_motion, part_size
     gt = read_articulation(cabinet / "gt.json")
     out = _out(tmp_path, cabinet, gt.joints)
     figures = optimise(out, load_capture(cabinet), QUIET,
                        OptimiseOptions(iterations=80, types=False, parts=True))
     assert figures["added"] == [] and figures["removed"] == [] and figures["joints"] == 2
-    assert little_motion("revolute", np.radians(0.6), 1.0)
-    assert not little_motion("revolute", np.radians(30), 1.0)
-    assert little_motion("prismatic", 0.04, 1.0) and not little_motion("prismatic", 0.04, 0.5)
+    part = np.random.default_rng(0).uniform(0, 1, (4000, 3)) * [0.8, 0.5, 0.1]   # 0.9 m across
+    assert part_size(part) == pytest.approx(0.96 * np.sqrt(0.8 ** 2 + 0.5 ** 2 + 0.1 ** 2), rel=0.02)
+    assert little_motion("revolute", np.radians(0.6), part)
+    assert not little_motion("revolute", np.radians(30), part)
+    # a slide is measured against its part: 4 cm is little for this part, not for one half as big
+    assert little_motion("prismatic", 0.04, part) and not little_motion("prismatic", 0.04, part / 2)
 
 
 # --- camera refinement ---------------------------------------------------------------------------
