@@ -106,8 +106,7 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
         if sum(len(s.points) for s in steps) < 20:
             continue
         pts = part_points(model, k, limit=mc.track_points)
-        axis = model.joint_axes()[k].detach().cpu().numpy().astype(float)
-        origin = model.joint_origins()[k].detach().cpu().numpy().astype(float)
+        axis, origin = (line[k] for line in model.joint_lines())
         start = JointFit(model.types[k], axis, origin, np.array([values[t] for t in moving]),
                          np.nan, np.nan, 0.0)
         new = refine_on_steps(start, pts, steps, thr, mc, mc.refine_rounds)

@@ -485,8 +485,7 @@ def same_joint(model: ArticulatedSplat, i: int, j: int) -> bool:
     larger range."""
     if model.types[i] != model.types[j]:
         return False
-    a = model.joint_axes().detach().cpu().numpy().astype(float)
-    o = model.joint_origins().detach().cpu().numpy().astype(float)
+    a, o = model.joint_lines()
     cos = float(a[i] @ a[j])
     if np.degrees(np.arccos(min(abs(cos), 1.0))) > SAME_AXIS_DEG:
         return False

@@ -167,9 +167,8 @@ def hinge_off_part(model: ArticulatedSplat, k: int) -> bool:
     (:func:`.plausible.off_part`)."""
     if model.types[k] != REVOLUTE:
         return False
-    return off_part(model.joint_axes()[k].detach().cpu().numpy().astype(float),
-                    model.joint_origins()[k].detach().cpu().numpy().astype(float),
-                    part_points(model, k, limit=model.splat.n))
+    axes, origins = model.joint_lines()
+    return off_part(axes[k], origins[k], part_points(model, k, limit=model.splat.n))
 
 @torch.no_grad()
 def merge_target(model: ArticulatedSplat, frames, cfg, k: int, loss: float) -> int | None:
@@ -205,9 +204,8 @@ def drop_into_body(run, names: list[str], space: OpenSpace | None) -> list[str]:
     dropped = []
     for name in names:
         k = model.names.index(name)
-        share = into_body(space, model.types[k],
-                          model.joint_axes()[k].detach().cpu().numpy().astype(float),
-                          model.joint_origins()[k].detach().cpu().numpy().astype(float),
+        axes, origins = model.joint_lines()
+        share = into_body(space, model.types[k], axes[k], origins[k],
                           np.array(list(model.joint_values(k).values())),
                           part_points(model, k, limit=model.splat.n))
         if share > HIDDEN_SHARE:

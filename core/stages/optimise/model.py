@@ -159,6 +159,11 @@ class ArticulatedSplat:
     def joint_origins(self) -> torch.Tensor:
         return torch.where(self.locked[:, None], self.origins0, self.origins)
 
+    def joint_lines(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every joint's unit axis and point (K, 3 each) as float64 numpy, detached."""
+        return (self.joint_axes().detach().cpu().numpy().astype(float),
+                self.joint_origins().detach().cpu().numpy().astype(float))
+
     def values(self, ti: int) -> torch.Tensor:
         """Joint values (rad / m) at time index ``ti``."""
         return self.states[:, ti] * self.moving[ti] * self.units()
