@@ -444,6 +444,8 @@ def test_missed_part_added(cabinet, tmp_path):
                        OptimiseOptions(iterations=80, types=False, parts=True))
     art = read_articulation(out / layout.ARTICULATION)
     assert len(figures["added"]) == 1 and len(art.joints) == 2, figures
+    assert art.meta["added"] == figures["added"]
+    assert art.meta["rejected"] == figures["rejected"] == []
     new = next(j for j in art.joints if j.name == figures["added"][0])
     assert new.source == "optimise" and new.type == "revolute"
     s = match_joints([new], [door])[0]
