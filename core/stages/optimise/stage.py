@@ -223,7 +223,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if options.parts:
         added = missed.add_missed(run, share=0.05)
     if added and options.types:   # the new parts' types by the same evidence
-        evidence.update(hypotheses.select_types(run, share=0.0, prior=True,
+        evidence.update(hypotheses.select_types(run, share=0.0,
                                                 fixed=[name not in added for name in model.names]))
     if added:                     # the new parts refined with the others, then tested again
         refine(run, n // 2, share=0.07)
