@@ -597,12 +597,12 @@ def test_an_invented_part_that_moves_into_the_body_is_dropped(cabinet):
     _, run = _runner(capture, gt, gt, OptimiseOptions())
     model = run.model
     drawer = next(j.name for j in gt if j.type == "prismatic")
-    space = open_space(capture.static, model.size)
-    assert drop_into_body(run, list(model.names), space) == []
+    run.space = open_space(capture.static, model.size)
+    assert drop_into_body(run, list(model.names)) == []
     with torch.no_grad():
         model.states = model.states.clone()
         model.states[model.names.index(drawer)] *= -1
-    assert drop_into_body(run, list(model.names), space) == [drawer]
+    assert drop_into_body(run, list(model.names)) == [drawer]
     assert sorted(model.names) == sorted(j.name for j in gt if j.name != drawer)
     assert len(run.trust) == model.k
 
@@ -694,15 +694,27 @@ def test_key_time_is_never_the_closed_state(cabinet):
 
 def test_a_proposals_type_stays_unless_the_other_is_clearly_better():
     """The other type's fit must lower the loss by more than the evaluation's resolution (0.1 %)
-    to replace a proposal's type; parts without a proposal take the lower loss."""
+    to replace a joint's type (a proposal's, or the one an invented part was found as)."""
     from artgs.core.stages.optimise.hypotheses import chosen
-    own = (np.array([1.0, 1.0]), "start", "prismatic", False)
-    restart = (np.array([0.999, 1.0]), "restart", "prismatic", True)
-    near = (np.array([0.9992, 0.999]), "hinge", "revolute", False)
-    far = (np.array([0.99, 0.99]), "hinge", "revolute", False)
-    assert chosen([own, restart, near], "prismatic", prior=True)[1] == "restart"
-    assert chosen([own, restart, near], "prismatic", prior=False)[1] == "hinge"
-    assert chosen([own, restart, far], "prismatic", prior=True)[1] == "hinge"
+    own = (np.array([1.0, 1.0]), "start", "prismatic", False, False)
+    restart = (np.array([0.999, 1.0]), "restart", "prismatic", True, False)
+    near = (np.array([0.9992, 0.999]), "hinge", "revolute", False, False)
+    far = (np.array([0.99, 0.99]), "hinge", "revolute", False, False)
+    assert chosen([own, restart, near], "prismatic")[1] == "restart"
+    assert chosen([own, restart, far], "prismatic")[1] == "hinge"
+
+
+def test_a_fit_that_opens_the_part_into_the_body_is_not_chosen():
+    """A fit moving its part behind what the static views measured loses to any that does not,
+    however low its loss; when every fit does, the loss decides as before."""
+    from artgs.core.stages.optimise.hypotheses import chosen
+    inwards = (np.array([0.90, 0.90]), "wrong edge", "revolute", True, True)
+    outwards = (np.array([0.95, 0.95]), "true edge", "revolute", False, False)
+    slide = (np.array([0.97, 0.97]), "slide", "prismatic", False, False)
+    assert chosen([inwards, outwards, slide], "revolute")[1] == "true edge"
+    assert chosen([inwards, slide], "revolute")[1] == "slide"
+    also_inwards = outwards[:4] + (True,)
+    assert chosen([inwards, also_inwards], "revolute")[1] == "wrong edge"
 
 
 def test_a_probe_prefers_the_hypothesis_that_fits_over_the_best_scored(cabinet):

@@ -7,11 +7,11 @@ import numpy as np
 import torch
 
 from .fit import evaluate, part_level, search_states
-from .hypotheses import (REMOVE_TOL, clearly_better, hinge_lines, key_time, part_normal,
-                         part_points, score_at, state_candidates)
+from .hypotheses import (REMOVE_TOL, clearly_better, hidden_share, hinge_lines, key_time,
+                         part_normal, part_points, score_at, state_candidates)
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
-from .plausible import HIDDEN_SHARE, OpenSpace, into_body, little_motion, off_part
+from .plausible import HIDDEN_SHARE, little_motion, off_part
 from .seen import unexplained
 
 
@@ -193,21 +193,18 @@ def merge_target(model: ArticulatedSplat, frames, cfg, k: int, loss: float) -> i
             best = (merged, j)
     return None if best is None else best[1]
 
-def drop_into_body(run, names: list[str], space: OpenSpace | None) -> list[str]:
+def drop_into_body(run, names: list[str]) -> list[str]:
     """Of the invented joints ``names``, drop those whose final fit moves more than
     ``HIDDEN_SHARE`` of their part behind surfaces the static views measured
-    (:func:`.plausible.into_body`): an opening part moves into space, and an invented part has
-    no other evidence than the loss it lowers, which a piece of noise swung into the body (the
+    (:func:`.hypotheses.hidden_share`): an opening part moves into space, and an invented part
+    has no other evidence than the loss it lowers, which a piece of noise swung into the body (the
     demo cabinet's 173 Gaussians, 0.1 % of loss) also lowers. Asked after the final fits, not
     of the first (whose part holds more than the part). Returns the dropped names."""
     model = run.model
     dropped = []
     for name in names:
         k = model.names.index(name)
-        axes, origins = model.joint_lines()
-        share = into_body(space, model.types[k], axes[k], origins[k],
-                          np.array(list(model.joint_values(k).values())),
-                          part_points(model, k, limit=model.splat.n))
+        share = hidden_share(run, k)
         if share > HIDDEN_SHARE:
             run.progress.log(f"{name}: dropped, its fit moves {100 * share:.0f} % of its part "
                              f"into the body (behind what the static views measured)")

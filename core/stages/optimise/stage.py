@@ -97,6 +97,8 @@ class Runner:
         self.share = 0.0
         #: per joint name, the proposal's joint of the other type (hypotheses.alternative_of)
         self.alternatives: dict[str, list] = {}
+        #: where the static views measured the body (plausible.open_space), None without depth
+        self.space: OpenSpace | None = None
 
     def run_fit(self, steps: int, phase: str, share: float, **kw: Any) -> float:
         """A fit that reports progress for ``share`` of the stage."""
@@ -181,7 +183,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if options.cameras:
         model.use_cameras(frames.camera)
     run = Runner(model, frames, cfg, progress, options, trust)
-    space = open_space(capture.static, size)
+    space = run.space = open_space(capture.static, size)
     run.alternatives = {j.name: hypotheses.alternative_of(j, frames.times) for j in joints}
     n = options.iterations
     progress.log(f"optimise: {len(joints)} joint(s), {splat.n} Gaussians, "
@@ -221,12 +223,12 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if options.parts:
         added = missed.add_missed(run, share=0.05)
     if added and options.types:   # the new parts' types by the same evidence
-        evidence.update(hypotheses.select_types(run, share=0.0, prior=False,
+        evidence.update(hypotheses.select_types(run, share=0.0,
                                                 fixed=[name not in added for name in model.names]))
     if added:                     # the new parts refined with the others, then tested again
         refine(run, n // 2, share=0.07)
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
-        again += missed.drop_into_body(run, [a for a in added if a not in again], space)
+        again += missed.drop_into_body(run, [a for a in added if a not in again])
         removed += [name for name in again if name not in added]
         rejected = [name for name in added if name in again]
         added = [name for name in added if name not in again]
