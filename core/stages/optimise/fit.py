@@ -19,10 +19,6 @@ from ...train.losses import robust_image_loss
 from .frames import FrameSet
 from .model import ArticulatedSplat
 
-#: Relative loss difference the evaluation cannot resolve (its float noise): losses closer than
-#: this are ties.
-LOSS_RESOLUTION = 1e-3
-
 
 @dataclass
 class FitConfig:
@@ -174,26 +170,21 @@ def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitCon
     lowest image loss (others as they are) at :func:`score_level` (at the coarsest level a small
     part is lost in the blur and best moved anywhere: a PartNet dishwasher's front 7.7 cm out
     was searched to 58 cm there), then each value the median of itself and its neighbours in
-    time (:func:`median3`). Values whose losses tie (within ``LOSS_RESOLUTION``) are told apart
-    by continuity: the one nearest the previous time's (a test cabinet's drawer, 36 cm out at
-    the last time, tied at 0, 30 and 37 cm within 0.2 % at 32x24 pixels; 0 won on one CPU and
-    30 cm on another, and the median then pulled the time before to 7 cm)."""
+    time (:func:`median3`)."""
     level = score_level(frames)
     unit = model.unit_of(model.types[k])
     states = model.states.clone()
-    previous = 0.0
     for ti, t in enumerate(frames.times):
         if t == 0:
-            previous = float(states[k, ti]) * unit
             continue
         ids = frames.at_time(ti)
-        losses = np.empty(len(candidates))
-        for c, v in enumerate(candidates):
+        best, best_v = np.inf, 0.0
+        for v in candidates:
             model.states[k, ti] = float(v) / unit
-            losses[c] = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids)
-        ties = np.flatnonzero(losses <= losses.min() * (1 + LOSS_RESOLUTION))
-        previous = float(candidates[ties[np.argmin(np.abs(candidates[ties] - previous))]])
-        states[k, ti] = previous / unit
+            loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids)
+            if loss < best:
+                best, best_v = loss, float(v)
+        states[k, ti] = best_v / unit
         model.states[k, ti] = states[k, ti]
     at_rest = (states[k] * model.moving).cpu().numpy()       # time 0's value is 0
     states[k] = torch.as_tensor(median3(at_rest), device=states.device)

@@ -20,14 +20,14 @@ from typing import Any, Iterator
 import numpy as np
 import torch
 
-from .fit import LOSS_RESOLUTION, evaluate, part_level, score_level, search_states
+from .fit import evaluate, part_level, score_level, search_states
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
 from .plausible import HIDDEN_SHARE, into_body
 from .seen import seen_moving
 
 #: Relative loss increase below which a part's removal is taken (float noise of the evaluation).
-REMOVE_TOL = LOSS_RESOLUTION
+REMOVE_TOL = 1e-3
 #: Paired t statistic over the frames where a part moves above which its motion explains them
 #: better than its absence (a part whose motion only fits noise wins on some frames, loses on
 #: others).
