@@ -632,8 +632,11 @@ def test_depth_refinement_sets_the_last_decimals(cabinet):
 
 
 def test_searched_states_follow_the_true_motion(cabinet):
-    """From zero states, the search (true joints and parts) puts every joint within one
-    candidate step of its true state at every time, with no jump away from both neighbours."""
+    """From zero states, the search (true joints and parts, the other joints at their true
+    states) puts every joint within one candidate step of its true state at every time. With
+    the door at its searched states (one step short) instead, the drawer's candidates at the
+    last time tie within 0.2 % at this test's 32x24 pixels and the winner depends on the CPU's
+    last bits (README, "Ties in the state search")."""
     from artgs.core.geometry.parts import assign_parts
     from artgs.core.stages.optimise.fit import FitConfig, search_states
     from artgs.core.stages.optimise.frames import interaction_frames
@@ -652,7 +655,11 @@ def test_searched_states_follow_the_true_motion(cabinet):
     model = ArticulatedSplat(Splat.from_arrays(arrays, torch.device("cpu")), bare, frames.times,
                              labels, object_size(arrays.means), [False] * len(gt))
     model.hard = torch.as_tensor(labels)
+    truth = torch.tensor([[j.states[t] / model.unit_of(j.type) for t in frames.times]
+                          for j in gt], dtype=model.states.dtype)
     for k, true in enumerate(gt):
+        model.states = truth.clone()
+        model.states[k] = 0.0
         grid = state_candidates(model, k)
         search_states(model, frames, k, FitConfig(), grid)
         found = model.joint_values(k)
