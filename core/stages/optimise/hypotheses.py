@@ -328,10 +328,10 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
     often a piece, and a realistic oven door's true hinge passed 0.23 of the piece's size from
     it), and of none that opens its part into the body (:func:`chosen`); the other type only
     when it explains those frames clearly better (:func:`clearly_better`): the joint's type (a
-    proposal's, or the one an invented part was found as) is a prior, and a type decided by 0.1 % of the loss is decided by noise (a realistic oven's part flipped
-    on 0.09 % with a change of the colour code; a PartNet washing machine's door, found as a
-    hinge, became a slide on 0.05 %, 46 deg off). Returns
-    per joint the evidence: each type's loss, the kept type, the relative margin between the
+    proposal's, or the one an invented part was found as) is a prior, and a type decided by
+    0.1 % of the loss is decided by noise (a realistic oven's part flipped on 0.09 % with a
+    change of the colour code; a PartNet washing machine's door, found as a hinge, became a
+    slide on 0.05 %, 46 deg off). Returns per joint the evidence: each type's loss, the kept type, the relative margin between the
     types and whether a restart of its own type was kept.
     """
     model, frames, cfg = run.model, run.frames, run.cfg
