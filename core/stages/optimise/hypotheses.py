@@ -331,8 +331,9 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
     proposal's, or the one an invented part was found as) is a prior, and a type decided by
     0.1 % of the loss is decided by noise (a realistic oven's part flipped on 0.09 % with a
     change of the colour code; a PartNet washing machine's door, found as a hinge, became a
-    slide on 0.05 %, 46 deg off). Returns per joint the evidence: each type's loss, the kept type, the relative margin between the
-    types and whether a restart of its own type was kept.
+    slide on 0.05 %, 46 deg off). Returns per joint the evidence: each type's loss, the kept
+    type, the relative margin between the types and whether a restart of its own type was
+    kept.
     """
     model, frames, cfg = run.model, run.frames, run.cfg
     evidence: dict[str, dict[str, Any]] = {}
