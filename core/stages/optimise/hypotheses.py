@@ -332,8 +332,9 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
     0.1 % of the loss is decided by noise (a realistic oven's part flipped on 0.09 % with a
     change of the colour code; a PartNet washing machine's door, found as a hinge, became a
     slide on 0.05 %, 46 deg off). Returns per joint the evidence: each type's loss, the kept
-    type, the relative margin between the types and whether a restart of its own type was
-    kept.
+    type, the relative margin between the types, whether a restart of its own type was kept,
+    and the types whose every fit opened the part into the body (:func:`into_space`; each
+    type's loss is over the fits that did not, where it has any).
     """
     model, frames, cfg = run.model, run.frames, run.cfg
     evidence: dict[str, dict[str, Any]] = {}
@@ -380,15 +381,19 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
             fitted.append((per_frame, snapshot(model), kind, kind == own,
                            hidden_share(run, k) > HIDDEN_SHARE))
             restore(model, kept)
-        losses = {t: min(float(f[0].mean()) for f in fitted if f[2] == t)
-                  for t in dict.fromkeys(f[2] for f in fitted)}
+        allowed = into_space(fitted)
+        losses = {t: min(float(f[0].mean()) for f in allowed if f[2] == t)
+                  for t in dict.fromkeys(f[2] for f in allowed)}
+        inward = [t for t in dict.fromkeys(f[2] for f in fitted) if t not in losses]
+        losses.update({t: min(float(f[0].mean()) for f in fitted if f[2] == t) for t in inward})
         _, snap, _, restarted, _ = chosen(fitted, own)
         restore(model, snap)
         kind = model.types[k]
         lo, hi = min(losses.values()), max(losses.values())
         margin = (hi - lo) / max(lo, 1e-12)
         evidence[name] = {f"loss_{t}": round(v, 6) for t, v in losses.items()}
-        evidence[name].update(type=kind, margin=round(margin, 6), restarted=restarted)
+        evidence[name].update(type=kind, margin=round(margin, 6), restarted=restarted,
+                              into_body=sorted(inward))
         run.progress.log(f"{name}: {kind}{' (restarted from a box edge)' if restarted else ''}"
                          " (image loss " + ", ".join(f"{v:.4f} {t}" for t, v in losses.items())
                          + ")")
@@ -423,6 +428,11 @@ def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: st
         run.done += share
     return best[1]
 
+def into_space(fitted: list[tuple]) -> list[tuple]:
+    """Of fits ``(per-frame losses, state, type, restarted, into the body)``, those that do not
+    open the part into the body; all of them when every one does."""
+    return [f for f in fitted if not f[4]] or fitted
+
 def chosen(fitted: list[tuple], own: str) -> tuple:
     """Of fits ``(per-frame losses, state, type, restarted, into the body)``, the one with the
     lowest mean loss of type ``own`` unless one of the other type is clearly better
@@ -430,7 +440,7 @@ def chosen(fitted: list[tuple], own: str) -> tuple:
     do: a part opens into space, and the static views measured where the body is (a realistic
     cabinet's invented door: its restart, the lower image loss, swung it inwards, and the part
     was then dropped as going into the body)."""
-    fitted = [f for f in fitted if not f[4]] or fitted
+    fitted = into_space(fitted)
     best = min(fitted, key=lambda f: f[0].mean())
     mine = min((f for f in fitted if f[2] == own), key=lambda f: f[0].mean(), default=best)
     if best[2] != own and not clearly_better(mine[0], best[0], []):
