@@ -10,7 +10,8 @@ hand, an unknown robot, a calibration error of the twin) bound the object only u
 So do the pixels that show the body's inside (:func:`inside_body`): an opened door or drawer
 reveals an interior the closed views never saw, which the splat does not hold. No placement of
 the closed parts explains it except a wrong one: a part moved into the body, where it covers
-those pixels at about their depth, which pays where the true opening leaves them empty. The
+those pixels at about their depth (a realistic cabinet's door swung inwards, a PartNet
+drawer pushed in, each explained the revealed inside better than its true opening did). The
 loss compares a render there only where it is nearer than the inside the frame measured.
 """
 
@@ -39,7 +40,7 @@ def inside_body(frame: Frame, depth: np.ndarray, obj: np.ndarray, space: OpenSpa
                 sigmas: float = 3.0) -> np.ndarray:
     """Pixels of ``frame`` (its measured ``depth``, within ``obj``) whose measured point lies
     inside the body even brought ``sigmas`` of the frame's depth noise nearer (a far camera's
-    noise puts a closed front centimetres behind itself): behind a surface some static view
+    noise puts a third of a closed front behind it): behind a surface some static view
     measured, on none they measured, in space none saw empty
     (:func:`~artgs.core.geometry.consistency.seen_where`, with the static views' own
     tolerances; a surface is behind what the views on its other side measured). A part that
