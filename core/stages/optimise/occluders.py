@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from ...geometry.consistency import seen_where
+from ...geometry.consistency import seen_behind
 from ...geometry.noise import noise_sigma
 from ...geometry.occlusion import twin_pixels
 from ...model.capture import Capture, Frame
@@ -41,17 +41,15 @@ def inside_body(frame: Frame, depth: np.ndarray, obj: np.ndarray, space: OpenSpa
     """Pixels of ``frame`` (its measured ``depth``, within ``obj``) whose measured point lies
     inside the body even brought ``sigmas`` of the frame's depth noise nearer (a far camera's
     noise puts a third of a closed front behind it): behind a surface some static view
-    measured, on none they measured, in space none saw empty
-    (:func:`~artgs.core.geometry.consistency.seen_where`, with the static views' own
-    tolerances; a surface is behind what the views on its other side measured). A part that
-    opens moves into space the static views saw empty, so its pixels are never among these.
-    Bool (H, W)."""
+    measured, in space none saw empty (:func:`~artgs.core.geometry.consistency.seen_behind`,
+    with the static views' own tolerances). A part that opens moves into space the static
+    views saw empty, so its pixels are never among these. Bool (H, W)."""
     near = np.where(depth > 0, np.maximum(depth - sigmas * noise_sigma([depth]), 1e-3), 0.0)
     pts, idx = frame.camera.backproject(near, obj)
     inside = np.zeros(depth.size, bool)
     if len(pts):
-        past, behind, at = seen_where(pts, space.views)
-        inside[idx[(behind > 0) & (past == 0) & (at == 0)]] = True
+        past, behind = seen_behind(pts, space.views)
+        inside[idx[(behind > 0) & (past == 0)]] = True
     return inside.reshape(depth.shape)
 
 
