@@ -93,15 +93,25 @@ def seen_behind(points: np.ndarray, views: list[tuple[Frame, np.ndarray, float]]
     ``views``: per view its frame, raw depth and tolerance (:func:`depth_views`). Views outside
     whose image the point falls or without a measurement at its pixel say nothing. Two int
     arrays (N,)."""
+    past, behind, _ = seen_where(points, views)
+    return past, behind
+
+
+def seen_where(points: np.ndarray, views: list[tuple[Frame, np.ndarray, float]]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`seen_behind`'s two counts, and per point how many views measure a surface at it
+    (within the view's tolerance): three int arrays (N,)."""
     past = np.zeros(len(points), np.int64)
     behind = np.zeros(len(points), np.int64)
+    at = np.zeros(len(points), np.int64)
     for f, raw, tol in views:
         inside, ii, jj, zi = pixels_of(f, points, raw.shape)
         d = raw[ii, jj]
         idx = np.flatnonzero(inside)
         past[idx] += (d > 0) & (d > zi + tol)
         behind[idx] += (d > 0) & (d < zi - tol)
-    return past, behind
+        at[idx] += (d > 0) & (np.abs(d - zi) <= tol)
+    return past, behind, at
 
 
 def depth_views(frames: list[Frame], margin: float, sigmas: float = 3.0

@@ -588,6 +588,37 @@ def _runner(capture, gt, joints, options: OptimiseOptions):
     return arrays, Runner(model, frames, FitConfig(), QUIET, options, torch.zeros(len(joints)))
 
 
+def test_pixels_that_show_the_bodys_inside_are_found(cabinet):
+    """Closed, the frames show no inside; opened, the door and drawer reveal some, and every
+    pixel taken for the inside measures a point within the closed body's box (gt.urdf), none
+    on the parts out in front."""
+    import yourdfpy
+    from artgs.core.stages.optimise.occluders import inside_body
+    from artgs.core.stages.optimise.plausible import open_space
+    from artgs.core.stages.optimise.stage import object_size
+
+    capture = load_capture(cabinet)
+    space = open_space(capture.static, object_size(initial_splats(capture.static)[0].means))
+    robot = yourdfpy.URDF.load(str(cabinet / "gt.urdf"))
+    corners = []
+    for v in robot.link_map["base"].visuals:
+        T = robot.get_transform("base", "world") @ (np.eye(4) if v.origin is None else v.origin)
+        signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+        corners.append(signs * np.asarray(v.geometry.box.size) / 2 @ T[:3, :3].T + T[:3, 3])
+    lo, hi = np.concatenate(corners).min(0) - 0.01, np.concatenate(corners).max(0) + 0.01
+    found = 0
+    for f in capture.interaction:
+        depth = np.nan_to_num(f.depth)
+        inside = inside_body(f, depth, f.mask, space)
+        if f.time == 0:
+            assert not inside.any(), f.index
+            continue
+        pts, _ = f.camera.backproject(np.where(inside, depth, 0.0))
+        assert np.all((pts > lo) & (pts < hi)), f.index
+        found += len(pts)
+    assert found > 100
+
+
 def test_an_invented_part_that_moves_into_the_body_is_dropped(cabinet):
     """Of the invented parts (here the true ones, with true states), the one whose states are
     turned the other way (the drawer pushed into the cabinet) is dropped; the others stay."""

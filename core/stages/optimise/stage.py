@@ -167,13 +167,14 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     t0 = time.perf_counter()
     dev = resolve_device(options.device)
     torch.manual_seed(options.seed)
+    size = object_size(arrays.means)
+    space = open_space(capture.static, size)
     frames = interaction_frames(capture, dev, occluders=known_occluders(capture, dev,
-                                                                       options.robot_twin),
+                                                                       options.robot_twin, space),
                                 mask_pixels=cfg.mask_pixels)
     if options.robot_twin:
         frames.tool = tool_path(capture)
     splat = Splat.from_arrays(arrays, dev)
-    size = object_size(arrays.means)
     joints = list(proposals.joints)
     labels = assign_parts(arrays.means, joints)
     model = ArticulatedSplat(splat, joints, frames.times, labels, size,
@@ -183,7 +184,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if options.cameras:
         model.use_cameras(frames.camera)
     run = Runner(model, frames, cfg, progress, options, trust)
-    space = run.space = open_space(capture.static, size)
+    run.space = space
     run.alternatives = {j.name: hypotheses.alternative_of(j, frames.times) for j in joints}
     n = options.iterations
     progress.log(f"optimise: {len(joints)} joint(s), {splat.n} Gaussians, "
