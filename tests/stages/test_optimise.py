@@ -640,6 +640,56 @@ def test_an_invented_part_that_moves_into_the_body_is_dropped(cabinet):
     assert len(run.trust) == model.k
 
 
+def test_a_fit_into_the_body_is_turned_outwards(cabinet):
+    """With the true joints turned into the cabinet (the drawer's states negated, the door's
+    negated and halved: swung right round, a door lies along the inside of the side wall, within
+    the static views' tolerance of it), ``turn_outwards`` turns each joint's states back
+    outwards wherever the inward one hid most of its part, and the joint no longer goes into the
+    body; true states are left alone."""
+    from artgs.core.stages.optimise.hypotheses import hidden_share, turn_outwards
+    from artgs.core.stages.optimise.plausible import HIDDEN_SHARE, open_space
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    _, run = _runner(capture, gt, gt, OptimiseOptions())
+    model = run.model
+    run.space = open_space(capture.static, model.size)
+    assert not any(turn_outwards(run, k) for k in range(model.k))
+    scale = [-1.0 if j.type == "prismatic" else -0.5 for j in gt]
+    with torch.no_grad():
+        model.states = model.states * torch.tensor(scale)[:, None]
+    for k, true in enumerate(gt):
+        assert hidden_share(run, k) > HIDDEN_SHARE, true.name
+        assert turn_outwards(run, k), true.name
+        assert hidden_share(run, k) <= HIDDEN_SHARE, true.name
+        got = model.joint_values(k)
+        widest = max(true.states, key=lambda t: abs(true.states[t]))
+        want = abs(scale[k]) * true.states[widest]
+        assert got[widest] == pytest.approx(want, abs=1e-5), true.name
+
+
+def test_the_bodys_inside_counts_as_a_change(cabinet):
+    """The pixels where an opened part reveals the body's inside are loss occluders (compared
+    only where the render is nearer) but still changes for the missed-part search: most of
+    them change from the closed frame."""
+    from artgs.core.stages.optimise.changes import frame_changes
+    from artgs.core.stages.optimise.frames import interaction_frames
+    from artgs.core.stages.optimise.occluders import known_occluders
+    from artgs.core.stages.optimise.plausible import open_space
+    from artgs.core.stages.optimise.stage import object_size
+
+    capture = load_capture(cabinet)
+    dev = torch.device("cpu")
+    space = open_space(capture.static, object_size(initial_splats(capture.static)[0].means))
+    frames = interaction_frames(capture, dev, occluders=known_occluders(capture, dev, True, space))
+    inside = {i: v.occluder_depth > 0 for i, v in enumerate(frames.levels[0])
+              if v.occluder_depth is not None}
+    changed = frame_changes(frames)
+    seen = sum(int(inside[i].sum()) for i in changed if i in inside)
+    hit = sum(int((inside[i] & changed[i]).sum()) for i in changed if i in inside)
+    assert seen > 50 and hit > 0.7 * seen, (hit, seen)
+
+
 def test_depth_refinement_sets_the_last_decimals(cabinet):
     """From joints 1.5 degrees and 1 cm off (true types, states and parts), the refinement on the
     frames' depth at least halves each axis error and is kept (the image loss is no worse); the

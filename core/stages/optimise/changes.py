@@ -48,11 +48,13 @@ def _gain(a: View, b: View, region: torch.Tensor) -> torch.Tensor:
 def _differences(a: View, b: View, da: torch.Tensor, db: torch.Tensor
                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Colour and depth differences of two frames of one camera, and the object region where
-    they count (either frame's object, nothing known in front: an arm, a hand)."""
+    they count (either frame's object, nothing known in front: an arm, a hand). Occluders
+    inside the mask (the body's inside an opened part reveals, core/stages/optimise/
+    occluders.py) count: the part's motion changed them."""
     region = region_of(a) | region_of(b)
     for v in (a, b):
         if v.occluder_depth is not None:
-            region &= v.occluder_depth <= 0
+            region &= (v.occluder_depth <= 0) | (v.mask > 0.5)
     colour = (colour_of(a) / _gain(a, b, region) - colour_of(b)).abs().mean(-1)
     both = (da > 0) & (db > 0)
     depth = torch.where(both, (da - db).abs(), torch.zeros_like(da))

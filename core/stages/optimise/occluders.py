@@ -11,7 +11,9 @@ So do the pixels that show the body's inside (:func:`inside_body`): an opened do
 reveals an interior the closed views never saw, which the splat does not hold. No placement of
 the closed parts explains it except a wrong one: a part moved into the body, where it covers
 those pixels at about their depth, which pays where the true opening leaves them empty. The
-loss compares a render there only where it is nearer than the inside the frame measured.
+loss compares a render there only where it is nearer than the inside the frame measured; the
+search for missed parts still counts them as changes (:mod:`.changes`), and a fit that then hides
+its part in the body is turned outwards (:func:`.hypotheses.turn_outwards`).
 """
 
 from __future__ import annotations
