@@ -392,11 +392,9 @@ def test_a_part_that_only_moves_out_of_the_way_is_removed(cabinet, tmp_path):
     assert set(names) == {j.name for j in gt.joints}, figures
 
 
-def test_pieces_of_one_door_become_one_joint(cabinet, tmp_path):
-    """The door proposed as two pieces (its box cut in half, each half with the door's joint, as
-    the motion route proposes a fragmented front): one joint is left, on the door's line."""
-    gt = read_articulation(cabinet / "gt.json")
-    door = next(j for j in gt.joints if j.type == "revolute")
+def _halves(door):
+    """The door as two pieces: its box cut in half along its longest side, each half with the
+    door's joint (as the motion route proposes a fragmented front)."""
     halves = []
     for sign, name in ((1, "upper"), (-1, "lower")):
         j = copy.deepcopy(door)
@@ -407,6 +405,15 @@ def test_pieces_of_one_door_become_one_joint(cabinet, tmp_path):
         half[a] *= 0.5
         j.extent = {"center": centre.tolist(), "axes": axes.tolist(), "half_size": half.tolist()}
         halves.append(j)
+    return halves
+
+
+def test_pieces_of_one_door_become_one_joint(cabinet, tmp_path):
+    """The door proposed as two pieces (:func:`_halves`): one joint is left, on the door's
+    line."""
+    gt = read_articulation(cabinet / "gt.json")
+    door = next(j for j in gt.joints if j.type == "revolute")
+    halves = _halves(door)
     out = _out(tmp_path, cabinet, [j for j in gt.joints if j is not door] + halves)
     figures = optimise(out, load_capture(cabinet), QUIET,
                        OptimiseOptions(iterations=60, types=False, parts=True))
@@ -416,6 +423,28 @@ def test_pieces_of_one_door_become_one_joint(cabinet, tmp_path):
     hinge = next(j for j in art.joints if j.type == "revolute")
     s = match_joints([hinge], [door])[0]
     assert s.axis_error_deg < 2.0 and s.origin_error_cm < 2.0, s
+
+
+def test_one_joint_takes_a_piece_its_own_fit_moves_wrongly(cabinet):
+    """The door as two pieces, the lower one's joint 40 deg and 10 cm off (a fit that ended
+    wrong, too far from the upper's for :func:`same_joint`): the upper half's true joint
+    explains both pieces better than the two apart, so it keeps both; the drawer, which moves
+    otherwise, is never taken."""
+    from artgs.core.stages.optimise.hypotheses import one_explains_both, same_joint
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    door = next(j for j in gt if j.type == "revolute")
+    drawer = next(j for j in gt if j.type == "prismatic")
+    upper, lower = _halves(door)
+    wrong = _perturb(lower, 40.0, 0.1, seed=3)
+    _, run = _runner(capture, [drawer, upper, lower], [drawer, upper, wrong], OptimiseOptions())
+    labels = run.model.labels().copy()
+    assert not same_joint(run.model, 1, 2)
+    pairs = one_explains_both(run, [False] * 3)
+    assert pairs and pairs[0] == (1, 2), pairs
+    assert all(0 not in p for p in pairs), pairs
+    assert np.array_equal(run.model.labels(), labels)      # the parts are given back
 
 
 def test_same_joint_needs_alike_axes_lines_and_states():
