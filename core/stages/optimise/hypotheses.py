@@ -562,9 +562,9 @@ def same_joint(model: ArticulatedSplat, i: int, j: int) -> bool:
 
 @torch.no_grad()
 def one_explains_both(run, fixed: list[bool]) -> list[tuple[int, int]]:
-    """Pairs ``(i, j)`` of joints whose parts move in some frames alike where joint ``i``
-    moving part ``j`` too explains the frames where either moves at least as well as the two
-    joints apart (the parts' Gaussians only reassigned, nothing refitted), the best first.
+    """Pairs ``(i, j)`` of joints that move in some of the same frames and where joint ``i``,
+    moving part ``j`` too, explains the frames where either moves at least as well as the two
+    joints apart (part ``j``'s Gaussians only reassigned, nothing refitted); the best first.
     Two joints fitted apart always explain their pieces a little better than one, so this holds
     only where a piece's own fit is wrong: the fits of a realistic washing machine's round door,
     proposed as two halves, ended 10 and 50 deg off, the worse moving its half 17 cm (rms) from
@@ -596,8 +596,8 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
     joints fitted apart always explain the frames a little better than one (on the test
     cabinet's door cut in two, 0.6 % of the image loss), so the loss is reported, not used to
     keep them apart; where the joints do not agree, one joint that explains both pieces at
-    least as well as the two apart (:func:`one_explains_both`) takes both. ``fixed`` joints (trusted user joints, locked ones) are left alone.
-    Returns ``[kept, merged]`` name pairs. The model must be hardened."""
+    least as well as the two apart (:func:`one_explains_both`) takes both. ``fixed`` joints
+    (trusted user joints, locked ones) are left alone. Returns ``[kept, merged]`` name pairs. The model must be hardened."""
     model, frames, cfg = run.model, run.frames, run.cfg
     merged: list[list[str]] = []
     fixed = list(fixed)
