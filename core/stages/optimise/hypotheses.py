@@ -597,7 +597,8 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
     cabinet's door cut in two, 0.6 % of the image loss), so the loss is reported, not used to
     keep them apart; where the joints do not agree, one joint that explains both pieces at
     least as well as the two apart (:func:`one_explains_both`) takes both. ``fixed`` joints
-    (trusted user joints, locked ones) are left alone. Returns ``[kept, merged]`` name pairs. The model must be hardened."""
+    (trusted user joints, locked ones) are left alone. Returns ``[kept, merged]`` name pairs.
+    The model must be hardened."""
     model, frames, cfg = run.model, run.frames, run.cfg
     merged: list[list[str]] = []
     fixed = list(fixed)
