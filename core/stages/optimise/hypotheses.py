@@ -608,6 +608,7 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
         pairs = [(i, j) for i in range(model.k) for j in range(model.k)
                  if i != j and not fixed[i] and not fixed[j]
                  and (counts[i], -i) > (counts[j], -j) and same_joint(model, i, j)]
+        alike = bool(pairs)
         if not pairs:
             pairs = one_explains_both(run, fixed)
         if not pairs:
@@ -623,7 +624,8 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
         run.run_fit(steps, f"{names[1]} with {names[0]}", 0.0,
                     free=[k == i for k in range(model.k)], lr_scale=0.3)
         joined = float(evaluate(model, frames, cfg).mean())
-        run.progress.log(f"{names[1]}: moves as {names[0]} does; its part joins {names[0]}'s "
+        why = "moves as {} does" if alike else "{}'s joint explains its part as well"
+        run.progress.log(f"{names[1]}: {why.format(names[0])}; its part joins {names[0]}'s "
                          f"(image loss {here:.5f} -> {joined:.5f})")
         merged.append(list(names))
 
