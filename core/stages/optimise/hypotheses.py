@@ -576,12 +576,16 @@ def one_explains_both(run, fixed: list[bool]) -> list[tuple[int, int]]:
     moving = [set(moving_frames(model, frames, k)) for k in range(model.k)]
     logits, hard = model.logits, model.hard
     found = []
+    apart_of: dict[frozenset, np.ndarray] = {}    # the same for (i, j) and (j, i)
     for i in range(model.k):
         for j in range(model.k):
             if i == j or fixed[i] or fixed[j] or not moving[i] & moving[j]:
                 continue
             ids = sorted(moving[i] | moving[j])
-            apart = evaluate(model, frames, cfg, 0, ids)
+            pair = frozenset((i, j))
+            if pair not in apart_of:
+                apart_of[pair] = evaluate(model, frames, cfg, 0, ids)
+            apart = apart_of[pair]
             part = model.labels() == j + 1
             model.reassign(part, i + 1)
             one = evaluate(model, frames, cfg, 0, ids)
@@ -602,8 +606,9 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
     which is refitted with it (a quarter of the main fit's steps, only that joint free). Two
     joints fitted apart always explain the frames a little better than one (on the test
     cabinet's door cut in two, 0.6 % of the image loss), so the loss is reported, not used to
-    keep them apart; where the joints do not agree, one joint that explains both pieces at
-    least as well as the two apart (:func:`one_explains_both`) takes both. ``fixed`` joints
+    keep them apart; where the joints do not agree, one joint that explains both pieces
+    clearly better than the two apart and than the other piece at rest
+    (:func:`one_explains_both`) takes both. ``fixed`` joints
     (trusted user joints, locked ones) are left alone. Returns ``[kept, merged]`` name pairs.
     The model must be hardened."""
     model, frames, cfg = run.model, run.frames, run.cfg
@@ -631,7 +636,7 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
         run.run_fit(steps, f"{names[1]} with {names[0]}", 0.0,
                     free=[k == i for k in range(model.k)], lr_scale=0.3)
         joined = float(evaluate(model, frames, cfg).mean())
-        why = "moves as {} does" if alike else "{}'s joint explains its part as well"
+        why = "moves as {} does" if alike else "{}'s joint explains its part better"
         run.progress.log(f"{names[1]}: {why.format(names[0])}; its part joins {names[0]}'s "
                          f"(image loss {here:.5f} -> {joined:.5f})")
         merged.append(list(names))
