@@ -447,6 +447,39 @@ def test_one_joint_takes_a_piece_its_own_fit_moves_wrongly(cabinet):
     assert np.array_equal(run.model.labels(), labels)      # the parts are given back
 
 
+def test_merged_pieces_start_from_one_joint_fitted_to_both(cabinet):
+    """Both halves moved by the door's joint: the one hinge fitted to their motions
+    (:func:`joint_for_both`) is the door's. The upper half's joint 30 deg and 10 cm off, the
+    lower's true: merged, the joint starts from that fit, which explains the door's frames
+    better than the wrong joint and lies nearer the door's line."""
+    from artgs.core.stages.optimise.hypotheses import joint_for_both, moving_frames, start_best
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    door = next(j for j in gt if j.type == "revolute")
+    drawer = next(j for j in gt if j.type == "prismatic")
+    upper, lower = _halves(door)
+    _, run = _runner(capture, [drawer, upper, lower], [drawer, upper, lower], OptimiseOptions())
+    hinge = next(f for f in joint_for_both(run.model, 1, 2) if f.type == "revolute")
+    fitted = Joint("fit", "revolute", hinge.axis, hinge.origin)
+    s = match_joints([fitted], [door])[0]
+    assert s.axis_error_deg < 0.5 and s.origin_error_cm < 0.5, s
+    states = [door.states[t] for t in run.model.times]
+    assert np.allclose(np.sign(hinge.axis @ door.axis) * hinge.values, states, atol=0.01)
+
+    wrong = _perturb(upper, 30.0, 0.1, seed=3)
+    _, run = _runner(capture, [drawer, upper, lower], [drawer, wrong, lower], OptimiseOptions())
+    model = run.model
+    fits = joint_for_both(model, 1, 2)
+    ids = sorted(set(moving_frames(model, run.frames, 1)) | set(moving_frames(model, run.frames, 2)))
+    model.reassign(model.labels() == 3, 2)
+    model.drop(2)
+    assert start_best(run, 1, fits, ids) == "revolute"
+    a, o = model.joint_lines()
+    merged = match_joints([Joint("m", "revolute", a[1], o[1])], [door])[0]
+    assert merged.axis_error_deg < match_joints([wrong], [door])[0].axis_error_deg - 5, merged
+
+
 def test_same_joint_needs_alike_axes_lines_and_states():
     """Joints are candidates for one only when type, axis, line and states agree."""
     from artgs.core.stages.optimise.hypotheses import same_joint

@@ -20,6 +20,7 @@ from typing import Any, Iterator
 import numpy as np
 import torch
 
+from ...geometry.rigid import JointFit, fit_both, kabsch
 from .fit import evaluate, part_level, score_level, search_states
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot
@@ -598,12 +599,46 @@ def one_explains_both(run, fixed: list[bool]) -> list[tuple[int, int]]:
     return [(i, j) for _, i, j in sorted(found)]
 
 
+@torch.no_grad()
+def joint_for_both(model: ArticulatedSplat, i: int, j: int) -> list[JointFit]:
+    """The revolute and the prismatic joint (:func:`.rigid.fit_both`) that best move parts
+    ``i`` and ``j`` together as their own joints move them apart: per time the rigid motion of
+    both parts' points (:func:`.rigid.kabsch`), then one joint fitted to those motions."""
+    pi, pj = part_points(model, i, 200), part_points(model, j, 200)
+    X = np.concatenate([pi, pj])
+    transforms = []
+    for ti in range(len(model.times)):
+        R, t, _ = (x.cpu().numpy().astype(float) for x in model.motions(ti))
+        transforms.append(kabsch(X, np.concatenate([pi @ R[i].T + t[i], pj @ R[j].T + t[j]])))
+    return list(fit_both(X, transforms))
+
+
+@torch.no_grad()
+def start_best(run, k: int, fits: list[JointFit], ids: list[int]) -> str:
+    """Joint ``k`` as it is or as one of ``fits``, whichever explains the frames ``ids`` best
+    (image loss); returns which (``"kept"`` or the fit's type)."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    best, chosen = float(evaluate(model, frames, cfg, 0, ids).mean()), "kept"
+    keep = snapshot(model)
+    for f in fits:
+        restore(model, keep)
+        model.set_type(k, f.type, f.axis, f.origin, f.values)
+        loss = float(evaluate(model, frames, cfg, 0, ids).mean())
+        if loss < best:
+            best, chosen, better = loss, f.type, snapshot(model)
+    restore(model, keep if chosen == "kept" else better)
+    return chosen
+
+
 def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
     """One joint for parts that move alike (:func:`same_joint`): the motion route often splits a
     door or a drawer front into pieces, each proposed with its own joint; fitted to the frames
     separately, their joints agree (the evidence that they are one), and each piece's motion
     explains its pixels, so none is spurious. The smaller part joins the larger one's joint,
-    which is refitted with it (a quarter of the main fit's steps, only that joint free). Two
+    which is refitted with it: started from whichever explains the pieces' frames best, that
+    joint or one joint fitted to both pieces' motions (:func:`joint_for_both`; where the larger
+    piece's own fit is the wrong one), then a quarter of the main fit's steps, only that joint
+    free. Two
     joints fitted apart always explain the frames a little better than one (on the test
     cabinet's door cut in two, 0.6 % of the image loss), so the loss is reported, not used to
     keep them apart; where the joints do not agree, one joint that explains both pieces
@@ -627,18 +662,22 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
             return merged
         i, j = pairs[0]
         here = float(evaluate(model, frames, cfg).mean())
+        fits = joint_for_both(model, i, j)
+        ids = sorted(set(moving_frames(model, frames, i)) | set(moving_frames(model, frames, j)))
         model.reassign(model.labels() == j + 1, i + 1)
         names = model.names[i], model.names[j]
         model.drop(j)
         run.trust = torch.cat([run.trust[:j], run.trust[j + 1:]])
         del fixed[j]
         i -= int(j < i)
+        start = start_best(run, i, fits, ids)
         run.run_fit(steps, f"{names[1]} with {names[0]}", 0.0,
                     free=[k == i for k in range(model.k)], lr_scale=0.3)
         joined = float(evaluate(model, frames, cfg).mean())
         why = "moves as {} does" if alike else "{}'s joint explains its part better"
-        run.progress.log(f"{names[1]}: {why.format(names[0])}; its part joins {names[0]}'s "
-                         f"(image loss {here:.5f} -> {joined:.5f})")
+        start = "" if start == "kept" else f", refitted from one {start} joint for both"
+        run.progress.log(f"{names[1]}: {why.format(names[0])}; its part joins {names[0]}'s"
+                         f"{start} (image loss {here:.5f} -> {joined:.5f})")
         merged.append(list(names))
 
 
