@@ -15,7 +15,7 @@ Missed parts are added in :mod:`.missed`; what the frames show moving is found i
 from __future__ import annotations
 
 from contextlib import contextmanager
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import torch
@@ -577,26 +577,35 @@ def one_explains_both(run, fixed: list[bool]) -> list[tuple[int, int]]:
     moving = [set(moving_frames(model, frames, k)) for k in range(model.k)]
     logits, hard = model.logits, model.hard
     found = []
-    apart_of: dict[frozenset, np.ndarray] = {}    # the same for (i, j) and (j, i)
+    apart: dict[int, float] = {}                # per frame, the model as it is
+    rest_of: dict[int, dict[int, float]] = {}   # per frame, part j at rest (the same for every i)
     for i in range(model.k):
         for j in range(model.k):
             if i == j or fixed[i] or fixed[j] or not moving[i] & moving[j]:
                 continue
             ids = sorted(moving[i] | moving[j])
-            pair = frozenset((i, j))
-            if pair not in apart_of:
-                apart_of[pair] = evaluate(model, frames, cfg, 0, ids)
-            apart = apart_of[pair]
             part = model.labels() == j + 1
+            here = memo_losses(apart, ids, lambda todo: evaluate(model, frames, cfg, 0, todo))
+            model.reassign(part, 0)
+            rest = memo_losses(rest_of.setdefault(j, {}), ids,
+                               lambda todo: evaluate(model, frames, cfg, 0, todo))
             model.reassign(part, i + 1)
             one = evaluate(model, frames, cfg, 0, ids)
-            model.reassign(part, 0)
-            rest = evaluate(model, frames, cfg, 0, ids)
             model.logits, model.hard = logits, hard
             every = list(range(len(ids)))
-            if clearly_better(apart, one, every) and clearly_better(rest, one, every):
-                found.append((one.mean() / apart.mean(), i, j))
+            if clearly_better(here, one, every) and clearly_better(rest, one, every):
+                found.append((one.mean() / here.mean(), i, j))
     return [(i, j) for _, i, j in sorted(found)]
+
+
+def memo_losses(memo: dict[int, float], ids: list[int],
+                losses: Callable[[list[int]], np.ndarray]) -> np.ndarray:
+    """Per-frame losses of frames ``ids``: those in ``memo`` from it, the others computed by
+    ``losses`` (of a frame list) and added to it."""
+    todo = [i for i in ids if i not in memo]
+    if todo:
+        memo.update(zip(todo, (float(x) for x in losses(todo))))
+    return np.array([memo[i] for i in ids])
 
 
 @torch.no_grad()
