@@ -647,14 +647,12 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
     which is refitted with it: started from whichever explains the pieces' frames best, that
     joint or one joint fitted to both pieces' motions (:func:`joint_for_both`; where the larger
     piece's own fit is the wrong one), then a quarter of the main fit's steps, only that joint
-    free. Two
-    joints fitted apart always explain the frames a little better than one (on the test
-    cabinet's door cut in two, 0.6 % of the image loss), so the loss is reported, not used to
-    keep them apart; where the joints do not agree, one joint that explains both pieces
+    free. Two joints fitted apart always explain the frames a little better than one (on the
+    test cabinet's door cut in two, 0.6 % of the image loss), so the loss is reported, not used
+    to keep them apart; where the joints do not agree, one joint that explains both pieces
     clearly better than the two apart and than the other piece at rest
-    (:func:`one_explains_both`) takes both. ``fixed`` joints
-    (trusted user joints, locked ones) are left alone. Returns ``[kept, merged]`` name pairs.
-    The model must be hardened."""
+    (:func:`one_explains_both`) takes both. ``fixed`` joints (trusted user joints, locked ones)
+    are left alone. Returns ``[kept, merged]`` name pairs. The model must be hardened."""
     model, frames, cfg = run.model, run.frames, run.cfg
     merged: list[list[str]] = []
     fixed = list(fixed)
