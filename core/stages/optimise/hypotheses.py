@@ -577,18 +577,22 @@ def one_explains_both(run, fixed: list[bool]) -> list[tuple[int, int]]:
     moving = [set(moving_frames(model, frames, k)) for k in range(model.k)]
     logits, hard = model.logits, model.hard
     found = []
+    labels = model.labels()
     apart: dict[int, float] = {}                # per frame, the model as it is
     rest_of: dict[int, dict[int, float]] = {}   # per frame, part j at rest (the same for every i)
+
+    def losses(todo: list[int]) -> np.ndarray:
+        return evaluate(model, frames, cfg, 0, todo)
+
     for i in range(model.k):
         for j in range(model.k):
             if i == j or fixed[i] or fixed[j] or not moving[i] & moving[j]:
                 continue
             ids = sorted(moving[i] | moving[j])
-            part = model.labels() == j + 1
-            here = memo_losses(apart, ids, lambda todo: evaluate(model, frames, cfg, 0, todo))
+            part = labels == j + 1
+            here = memo_losses(apart, ids, losses)
             model.reassign(part, 0)
-            rest = memo_losses(rest_of.setdefault(j, {}), ids,
-                               lambda todo: evaluate(model, frames, cfg, 0, todo))
+            rest = memo_losses(rest_of.setdefault(j, {}), ids, losses)
             model.reassign(part, i + 1)
             one = evaluate(model, frames, cfg, 0, ids)
             model.logits, model.hard = logits, hard
