@@ -57,3 +57,18 @@ def test_start_handle_kept_only_on_the_fitted_part_of_the_same_type():
     assert not handle_holds(_joint("prismatic", on), "revolute", pts, size=1.0)
     assert not handle_holds(_joint("revolute", off), "revolute", pts, size=1.0)
     assert not handle_holds(None, "revolute", pts, size=1.0)
+
+
+def test_probes_are_distinct_starts() -> None:
+    """Of ranked hypotheses, one within PROBE_SPREAD_DEG of a better one (either sign) is not
+    probed again; hinges along the same direction on other lines are."""
+    from artgs.core.stages.optimise.hypotheses import PROBE_SPREAD_DEG, distinct
+    from artgs.core.model.joints import rotation_about_axis
+    z, x = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
+    near = rotation_about_axis(x, np.radians(PROBE_SPREAD_DEG - 5)) @ -z
+    far = rotation_about_axis(x, np.radians(PROBE_SPREAD_DEG + 5)) @ z
+    o = np.zeros(3)
+    ranked = [(0.1, z, o), (0.2, near, o), (0.3, far, o), (0.4, x, o)]
+    assert [h[0] for h in distinct(ranked, "prismatic", 1.0)] == [0.1, 0.3, 0.4]
+    hinges = [(0.1, z, o), (0.2, -z, o + [0.01, 0, 0.3]), (0.3, z, o + [0.5, 0, 0])]
+    assert [h[0] for h in distinct(hinges, "revolute", 1.0)] == [0.1, 0.3]
