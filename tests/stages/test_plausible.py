@@ -60,9 +60,9 @@ def test_start_handle_kept_only_on_the_fitted_part_of_the_same_type():
 
 
 def test_probes_are_distinct_starts() -> None:
-    """Of ranked hypotheses, one within PROBE_SPREAD_DEG of a better one (either sign) is not
-    probed again; hinges along the same direction on other lines are."""
-    from artgs.core.stages.optimise.hypotheses import PROBE_SPREAD_DEG, distinct
+    """Of ranked hypotheses, one within PROBE_SPREAD_DEG of a better one (either sign) is the
+    same start; hinges along the same direction on other lines are not."""
+    from artgs.core.stages.optimise.hypotheses import PROBE_SPREAD_DEG, distinct, probed
     from artgs.core.model.joints import rotation_about_axis
     z, x = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
     near = rotation_about_axis(x, np.radians(PROBE_SPREAD_DEG - 5)) @ -z
@@ -72,3 +72,7 @@ def test_probes_are_distinct_starts() -> None:
     assert [h[0] for h in distinct(ranked, "prismatic", 1.0)] == [0.1, 0.3, 0.4]
     hinges = [(0.1, z, o), (0.2, -z, o + [0.01, 0, 0.3]), (0.3, z, o + [0.5, 0, 0])]
     assert [h[0] for h in distinct(hinges, "revolute", 1.0)] == [0.1, 0.3]
+    # the best three are probed, and the best other start when those three are one start
+    assert [h[0] for h in probed(ranked, "prismatic", 1.0)] == [0.1, 0.2, 0.3]
+    one = [(0.1, z, o), (0.2, near, o), (0.25, -z, o), (0.3, far, o), (0.4, x, o)]
+    assert [h[0] for h in probed(one, "prismatic", 1.0)] == [0.1, 0.2, 0.25, 0.3]
