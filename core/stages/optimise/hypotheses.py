@@ -37,9 +37,9 @@ SIGNIFICANT = 3.0
 PROBES = 3
 #: A probe's steps: the fit's iterations over this.
 PROBE_DIVISOR = 6
-#: Probed hypotheses are this far apart in direction (either sign), or (revolute) their lines
-#: ``SAME_LINE`` of the object's size apart: a fit's basin spans 10-30 deg (the basin benchmark),
-#: so closer starts probe one basin twice.
+#: Hypotheses within this angle of each other (either sign) and, revolute, on lines within
+#: ``SAME_LINE`` of the object's size are one start (:func:`distinct`): a fit's basin spans
+#: 10-30 deg (the basin benchmark), so closer starts probe one basin twice.
 PROBE_SPREAD_DEG = 20.0
 
 
