@@ -10,8 +10,9 @@ import pytest
 
 from artgs.core.geometry.parts import assign_parts
 from artgs.core.model.capture import load_capture
-from artgs.core.model.joints import Joint, read_articulation
+from artgs.core.model.joints import Joint, read_articulation, rotation_about_axis
 from artgs.core.model.regime import regime
+from artgs.core.stages.optimise.hypotheses import PROBE_SPREAD_DEG, distinct, probed
 from artgs.core.stages.optimise.plausible import HIDDEN_SHARE, open_space
 from artgs.core.stages.optimise.stage import handle_holds, object_size
 from artgs.core.stages.reconstruct import initial_splats
@@ -62,8 +63,6 @@ def test_start_handle_kept_only_on_the_fitted_part_of_the_same_type():
 def test_probes_are_distinct_starts() -> None:
     """Of ranked hypotheses, one within PROBE_SPREAD_DEG of a better one (either sign) is the
     same start; hinges along the same direction on other lines are not."""
-    from artgs.core.stages.optimise.hypotheses import PROBE_SPREAD_DEG, distinct, probed
-    from artgs.core.model.joints import rotation_about_axis
     z, x = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
     near = rotation_about_axis(x, np.radians(PROBE_SPREAD_DEG - 5)) @ -z
     far = rotation_about_axis(x, np.radians(PROBE_SPREAD_DEG + 5)) @ z

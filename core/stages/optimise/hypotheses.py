@@ -474,8 +474,10 @@ def probed(ranked: list[tuple], kind: str, size: float) -> list[tuple]:
     the best three distinct starts instead fixed it but lost ovens in the benchmarks (a PartNet
     oven 2.0 -> 90 deg, a realistic one 2.8 -> 9.1 deg)."""
     top = ranked[:PROBES]
-    others = [h for h in distinct(ranked, kind, size) if not any(h is g for g in top)]
-    return top + others[:1] if len(distinct(top, kind, size)) == 1 else top
+    if len(distinct(top, kind, size)) > 1:
+        return top
+    # the three are one start: distinct's second is the best hypothesis outside it
+    return top + distinct(ranked, kind, size)[1:2]
 
 def distinct(ranked: list[tuple], kind: str, size: float) -> list[tuple]:
     """Of hypotheses ``(loss, axis, point)`` in rank order, those not within
