@@ -373,3 +373,58 @@ def test_rotation_matrix_is_orthonormal():
     R = quat_to_rotmat(torch.randn(20, 4, dtype=DT) * 3)
     assert torch.allclose(R @ R.transpose(1, 2), torch.eye(3, dtype=DT).expand(20, 3, 3), atol=1e-12)
     assert torch.allclose(torch.linalg.det(R), torch.ones(20, dtype=DT))
+
+
+def test_projections_kept_between_renders_change_nothing(monkeypatch):
+    """The CPU backend projects again only the Gaussians whose inputs changed since its last
+    render of the camera (core/render/cpu/backend.py ``Projections``): renders and gradients
+    must be bit-identical to those of a fresh backend, whatever moved, and the kept
+    projections stay within their budget."""
+    from artgs.core.render.cpu import backend
+
+    def run(scenes, kept):
+        """Per scene, its render's outputs (and gradients: every third has them)."""
+        monkeypatch.setattr(backend, "PROJECTIONS", kept)
+        out = []
+        for i, params in enumerate(scenes):
+            if i % 3 == 2:
+                params = [p.clone().requires_grad_(True) for p in params]
+                r = rasterize(*params, K, np.eye(4), W, H, BG, "cpu")
+                (r.rgb.sum() + r.depth.sum() + r.alpha.sum()).backward()
+                out.append(list(r) + [p.grad for p in params])
+            else:
+                with torch.no_grad():
+                    out.append(list(rasterize(*params, K, np.eye(4), W, H, BG, "cpu")))
+        return out
+
+    base = random_scene(3, n=200, dtype=torch.float32)
+    part = slice(20, 60)
+    scenes = [base]
+    for change in ("means", "means", "opacity", "colours", "scales", "rotation bits"):
+        p = [t.clone() for t in scenes[-1]]     # one input of the part changes at a time
+        if change == "means":
+            p[0][part] += 0.02
+        elif change == "opacity":
+            p[3][part] -= 0.5
+        elif change == "colours":
+            p[4][part] *= 0.5
+        elif change == "scales":
+            p[2][part] += 0.1
+        else:
+            p[1] = p[1] * -1.0                  # the same rotations: only the bits differ
+        scenes.append(p)
+    kept = backend.Projections()
+    again = run(scenes, kept)
+    for i, scene in enumerate(scenes):          # each render alone, from a fresh backend
+        fresh = run([scene] * (i % 3 + 1), backend.Projections())[-1]
+        assert len(fresh) == len(again[i])
+        for a, b in zip(fresh, again[i]):
+            assert torch.equal(a, b), f"render {i} differs from a fresh backend's"
+    assert len(kept.entries) == 1
+    small = backend.Projections(budget=1)      # over budget: only the newest is kept
+    run([base], small)
+    monkeypatch.setattr(backend, "PROJECTIONS", small)
+    with torch.no_grad():
+        rasterize(*base, K, np.linalg.inv(look_at(np.array([0.0, 0.3, -1.0]), np.zeros(3))), W, H, BG,
+                  "cpu")
+    assert len(small.entries) == 1

@@ -7,6 +7,8 @@ of other dtypes are converted and gradients are returned in the inputs' dtype an
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numba
 import numpy as np
 import torch
@@ -27,14 +29,10 @@ class _RasterizeCPU(torch.autograd.Function):
     @staticmethod
     @cancellable
     def forward(ctx, means, quats, log_scales, opacity_logits, colors, cam, width, height, near,
-                low_pass):
+                low_pass, backward):
         arrays = [_f32(t) for t in (means, quats, log_scales, opacity_logits, colors)]
-        n = arrays[0].shape[0]
-        proj = np.empty((n, rk.NF), np.float32)
-        extent = np.empty((n, 2), np.float32)
-        visible = np.empty(n, np.bool_)
-        pk.project_forward(*arrays, cam, width, height, np.float32(near), np.float32(low_pass),
-                           proj, extent, visible)
+        proj, extent, visible = PROJECTIONS.project(arrays, cam, width, height, near, low_pass,
+                                                    backward)
         order, feats, ext = rk.sort_visible(proj, extent, visible)
         offsets, ids = rk.bin_tiles(feats, ext, width, height)
         out_c = np.empty((height, width, 3), np.float32)
@@ -66,7 +64,50 @@ class _RasterizeCPU(torch.autograd.Function):
                             *outs)
         result = [torch.from_numpy(g).to(device=device, dtype=dtype)
                   for g, (dtype, device) in zip(outs, ctx.like)]
-        return (*result, None, None, None, None, None)
+        return (*result, None, None, None, None, None, None)
+
+
+class Projections:
+    """The last projection per camera, image size and Gaussian count, so that the next render
+    projects only the Gaussians whose inputs changed.
+
+    The optimisation renders one camera again and again with one part moved (state searches,
+    hypothesis scores, one joint's fits): projecting every Gaussian was a fifth of such a
+    render. The result is bit-identical to a full projection (each row is a function of its
+    own inputs only). Kept least recently used first, within ``budget`` bytes (at least the
+    newest)."""
+
+    def __init__(self, budget: int = 96 << 20) -> None:
+        self.budget = budget
+        self.entries: OrderedDict[tuple, tuple[np.ndarray, ...]] = OrderedDict()
+
+    def project(self, arrays: list[np.ndarray], cam: np.ndarray, width: int, height: int,
+                near: float, low_pass: float, private: bool
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``project_forward`` of ``arrays`` (means, quats, log_scales, opacity logits, colours):
+        (feats (N,12), extent (N,2), visible (N,)), kept here for the next call: read-only,
+        and valid until then unless ``private`` (copies, for a backward pass)."""
+        n = arrays[0].shape[0]
+        key = (cam.tobytes(), width, height, near, low_pass, n)
+        entry = self.entries.pop(key, None)   # re-entered only once projected
+        if entry is None:
+            bits = [a.reshape(n, int(np.prod(a.shape[1:]))).view(np.uint32) for a in arrays]
+            entry = (np.concatenate(bits, 1), np.empty((n, rk.NF), np.float32),
+                     np.empty((n, 2), np.float32), np.empty(n, np.bool_))
+            seen = entry[0][:0]               # no rows: project them all
+        else:
+            seen = entry[0]
+        pk.project_forward(*arrays, cam, width, height, np.float32(near), np.float32(low_pass),
+                           seen, *entry[1:])
+        self.entries[key] = entry
+        while len(self.entries) > 1 and sum(a.nbytes for e in self.entries.values()
+                                             for a in e) > self.budget:
+            self.entries.popitem(last=False)
+        feats, extent, visible = entry[1:]
+        return (feats.copy(), extent, visible.copy()) if private else (feats, extent, visible)
+
+
+PROJECTIONS = Projections()
 
 
 def _grad(g: torch.Tensor | None, shape) -> np.ndarray:
@@ -88,6 +129,7 @@ def rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K, w2c, widt
     A Ctrl-C inside the kernels or torch's autograd machinery comes out as
     ``Cancelled`` (core/model/interrupt.py), never a ``SystemError``.
     """
-    return _RasterizeCPU.apply(means, quats, log_scales, opacity_logits, colors,
-                               camera_array(K, w2c), int(width), int(height), float(near),
-                               float(low_pass))
+    inputs = (means, quats, log_scales, opacity_logits, colors)
+    backward = torch.is_grad_enabled() and any(t.requires_grad for t in inputs)
+    return _RasterizeCPU.apply(*inputs, camera_array(K, w2c), int(width), int(height),
+                               float(near), float(low_pass), backward)

@@ -137,13 +137,36 @@ def _limits(cam, width, height):
             (height - cy) / fy + _FOV_PAD * tan_y, cy / fy + _FOV_PAD * tan_y)
 
 
+@kernel
+def _recall(seen, n, c, values):
+    """Whether row ``n`` of ``values`` ((N, m) uint32) equals columns ``c``..``c+m`` of
+    ``seen`` (N,14), the bits of the inputs the row was last projected from; where not,
+    ``seen`` takes it."""
+    same = True
+    for i in range(values.shape[1]):
+        v = values[n, i]
+        if v != seen[n, c + i]:
+            same = False
+            seen[n, c + i] = v
+    return same
+
+
 @kernel(parallel=True, fastmath=True)
 def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width, height, near,
-                    low_pass, out, extent, visible):
-    """Fill ``out`` (N,12), ``extent`` (N,2) and ``visible`` (N,) for every Gaussian."""
+                    low_pass, seen, out, extent, visible):
+    """Fill ``out`` (N,12), ``extent`` (N,2) and ``visible`` (N,) for every Gaussian, or, when
+    ``seen`` has N rows, only for those whose inputs' bits (the five side by side) differ from
+    ``seen`` (the other rows still hold their projection of those inputs; ``seen`` is
+    updated). Either way every row is its own inputs' projection: no row depends on another."""
     fx, fy, cx, cy = cam[0], cam[1], cam[2], cam[3]
     lxp, lxn, lyp, lyn = _limits(cam, width, height)
+    recall = seen.shape[0] == means.shape[0]
+    mb, qb, sb = means.view(np.uint32), quats.view(np.uint32), log_scales.view(np.uint32)
+    ob, cb = opacity_logits.reshape((-1, 1)).view(np.uint32), colors.view(np.uint32)
     for n in prange(means.shape[0]):
+        if recall and (_recall(seen, n, 0, mb) & _recall(seen, n, 3, qb) & _recall(seen, n, 7, sb)
+                       & _recall(seen, n, 10, ob) & _recall(seen, n, 11, cb)):
+            continue
         px, py, pz = means[n, 0], means[n, 1], means[n, 2]
         x = cam[4] * px + cam[5] * py + cam[6] * pz + cam[13]
         y = cam[7] * px + cam[8] * py + cam[9] * pz + cam[14]
@@ -183,6 +206,15 @@ def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width
         extent[n, 0], extent[n, 1] = ex, ey
 
 
+@kernel
+def _any_nonzero(grad, n):
+    """Whether row ``n`` of ``grad`` has a non-zero entry."""
+    for f in range(grad.shape[1]):
+        if grad[n, f] != _ZERO:
+            return True
+    return False
+
+
 @kernel(parallel=True, fastmath=True)
 def project_backward(means, quats, log_scales, cam, width, height, feats, visible, grad,
                      g_means, g_quats, g_log_scales, g_logits, g_colors):
@@ -195,7 +227,7 @@ def project_backward(means, quats, log_scales, cam, width, height, feats, visibl
         g_log_scales[n, :] = _ZERO
         g_logits[n] = _ZERO
         g_colors[n, :] = _ZERO
-        if not visible[n]:
+        if not visible[n] or not _any_nonzero(grad, n):   # occluded: all its gradients are 0
             continue
         px, py, pz = means[n, 0], means[n, 1], means[n, 2]
         x = cam[4] * px + cam[5] * py + cam[6] * pz + cam[13]
