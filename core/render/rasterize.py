@@ -47,13 +47,16 @@ def camera_centre(w2c: torch.Tensor) -> torch.Tensor:
 def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
               opacity_logits: torch.Tensor, sh: torch.Tensor, K, w2c, width: int, height: int,
               background=None, backend: str = "auto", near: float = NEAR_PLANE,
-              low_pass: float = LOW_PASS) -> RenderOutput:
+              low_pass: float = LOW_PASS, grad_rows: torch.Tensor | None = None
+              ) -> RenderOutput:
     """Render N Gaussians with intrinsics ``K`` (3x3) and ``w2c`` (4x4, OpenCV axes).
 
     ``low_pass``: the 2D dilation in px^2 (this project's default, core/render/constants.py; 0.3 is
     the original 3DGS value, for splats trained with it).
 
     Differentiable w.r.t. every Gaussian input (and ``background`` if it is a tensor).
+    ``grad_rows``: indices of the only Gaussians whose gradients the caller uses (a fit that
+    moves one part); the others' may then be zero (the CPU backend skips their backward).
     """
     width, height = int(width), int(height)
     if width < 1 or height < 1:
@@ -82,7 +85,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor
     else:
         from .cpu.backend import rasterize_cpu
         csum, dsum, alpha = rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K,
-                                          w2c, width, height, near, low_pass)
+                                          w2c, width, height, near, low_pass, grad_rows)
         rgb = csum + (1.0 - alpha)[..., None] * bg
     valid = alpha > ALPHA_EPS
     depth = torch.where(valid, dsum / torch.where(valid, alpha, torch.ones_like(alpha)),

@@ -428,3 +428,23 @@ def test_projections_kept_between_renders_change_nothing(monkeypatch):
         rasterize(*base, K, np.linalg.inv(look_at(np.array([0.0, 0.3, -1.0]), np.zeros(3))), W, H, BG,
                   "cpu")
     assert len(small.entries) == 1
+
+
+def test_grad_rows_keep_their_gradients():
+    """``grad_rows``: the listed Gaussians' gradients are those of a full backward (bit for
+    bit), the others' are zero on the CPU backend."""
+    base = random_scene(5, n=120, dtype=torch.float32)
+    rows = torch.arange(10, 50)
+
+    def grads(grad_rows):
+        params = [p.clone().requires_grad_(True) for p in base]
+        r = rasterize(*params, K, np.eye(4), W, H, BG, "cpu", grad_rows=grad_rows)
+        (r.rgb.sum() + 2 * r.depth.sum() + r.alpha.sum()).backward()
+        return [p.grad for p in params]
+
+    full, some = grads(None), grads(rows)
+    others = torch.ones(120, dtype=torch.bool)
+    others[rows] = False
+    for f, s in zip(full, some):
+        assert torch.equal(f[rows], s[rows])
+        assert f[others].abs().sum() > 0 and s[others].abs().sum() == 0

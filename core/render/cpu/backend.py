@@ -29,7 +29,7 @@ class _RasterizeCPU(torch.autograd.Function):
     @staticmethod
     @cancellable
     def forward(ctx, means, quats, log_scales, opacity_logits, colors, cam, width, height, near,
-                low_pass, backward):
+                low_pass, backward, rows):
         arrays = [_f32(t) for t in (means, quats, log_scales, opacity_logits, colors)]
         proj, extent, visible = PROJECTIONS.project(arrays, cam, width, height, near, low_pass,
                                                     backward)
@@ -41,7 +41,7 @@ class _RasterizeCPU(torch.autograd.Function):
         out_n = np.empty((height, width), np.int32)
         rk.blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n)
         ctx.saved = (arrays, cam, width, height, proj, visible, order, feats, offsets, ids,
-                     out_a, out_n)
+                     out_a, out_n, rows)
         ctx.like = [(t.dtype, t.device) for t in (means, quats, log_scales, opacity_logits, colors)]
         dtype, device = means.dtype, means.device
         return tuple(torch.from_numpy(a).to(device=device, dtype=dtype)
@@ -51,7 +51,7 @@ class _RasterizeCPU(torch.autograd.Function):
     @cancellable
     def backward(ctx, g_c, g_d, g_a):
         (arrays, cam, width, height, proj, visible, order, feats, offsets, ids,
-         out_a, out_n) = ctx.saved
+         out_a, out_n, rows) = ctx.saved
         grads = np.zeros((numba.get_num_threads(), feats.shape[0], rk.NF), np.float32)
         rk.blend_backward(feats, offsets, ids, width, height, out_a, out_n,
                           _grad(g_c, (height, width, 3)), _grad(g_d, (height, width)),
@@ -60,11 +60,15 @@ class _RasterizeCPU(torch.autograd.Function):
         rk.sum_thread_grads(grads, order, g_proj)
         outs = [np.empty_like(a) for a in arrays]
         means, quats, log_scales = arrays[:3]
+        if rows is not None:      # only these Gaussians' gradients are used
+            wanted = np.zeros_like(visible)
+            wanted[rows] = True
+            visible = visible & wanted
         pk.project_backward(means, quats, log_scales, cam, width, height, proj, visible, g_proj,
                             *outs)
         result = [torch.from_numpy(g).to(device=device, dtype=dtype)
                   for g, (dtype, device) in zip(outs, ctx.like)]
-        return (*result, None, None, None, None, None, None)
+        return (*result, None, None, None, None, None, None, None)
 
 
 class Projections:
@@ -123,13 +127,15 @@ def camera_array(K: torch.Tensor, w2c: torch.Tensor) -> np.ndarray:
 
 @cancellable
 def rasterize_cpu(means, quats, log_scales, opacity_logits, colors, K, w2c, width, height, near,
-                  low_pass):
+                  low_pass, grad_rows=None):
     """Colour sum without background (H,W,3), alpha-weighted depth sum (H,W), alpha (H,W).
+    ``grad_rows``: the only Gaussians whose gradients are used (the others' are zero).
 
     A Ctrl-C inside the kernels or torch's autograd machinery comes out as
     ``Cancelled`` (core/model/interrupt.py), never a ``SystemError``.
     """
     inputs = (means, quats, log_scales, opacity_logits, colors)
     backward = torch.is_grad_enabled() and any(t.requires_grad for t in inputs)
+    rows = None if grad_rows is None else np.asarray(torch.as_tensor(grad_rows).cpu())
     return _RasterizeCPU.apply(*inputs, camera_array(K, w2c), int(width), int(height),
-                               float(near), float(low_pass), backward)
+                               float(near), float(low_pass), backward, rows)

@@ -221,7 +221,15 @@ class ArticulatedSplat:
         if view.occluder is not None:
             g = concat(g, view.occluder)
         return rasterize(g.means, g.quats, g.log_scales, g.opacity_logits, g.sh, view.K, view.w2c,
-                         view.width, view.height, None, backend)
+                         view.width, view.height, None, backend, grad_rows=self.grad_rows())
+
+    def grad_rows(self) -> torch.Tensor | None:
+        """The Gaussians whose render gradients reach a parameter: a hardened model's parts'
+        (the base's stay put, and the splat itself is not fitted), unless the cameras are
+        learnt (every Gaussian moves with its camera); None: all."""
+        if self.hard is None or self.refine_cameras or not torch.is_grad_enabled():
+            return None
+        return self.members()[0]
 
     @torch.no_grad()
     def colours(self, view, ti: int, motions: tuple | None = None) -> torch.Tensor:
