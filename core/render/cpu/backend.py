@@ -3,6 +3,9 @@ core/render/cpu/blend_kernels.py) as one torch.autograd.Function with hand-writt
 
 All kernel arrays are float32 and contiguous (one compiled specialisation per kernel); inputs
 of other dtypes are converted and gradients are returned in the inputs' dtype and device.
+Each camera's last projection is kept (:class:`Projections`): a render projects again only
+the Gaussians whose inputs changed since, and a backward pass can be limited to the Gaussians
+whose gradients the caller uses (``grad_rows``).
 """
 
 from __future__ import annotations
@@ -79,7 +82,8 @@ class Projections:
     hypothesis scores, one joint's fits): projecting every Gaussian was a fifth of such a
     render. The result is bit-identical to a full projection (each row is a function of its
     own inputs only). Kept least recently used first, within ``budget`` bytes (at least the
-    newest)."""
+    newest). One per process (:data:`PROJECTIONS`), used from one thread: the engine renders
+    from one."""
 
     def __init__(self, budget: int = 96 << 20) -> None:
         self.budget = budget
@@ -90,7 +94,8 @@ class Projections:
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``project_forward`` of ``arrays`` (means, quats, log_scales, opacity logits, colours):
         (feats (N,12), extent (N,2), visible (N,)), kept here for the next call: read-only,
-        and valid until then unless ``private`` (copies, for a backward pass)."""
+        and valid until then; with ``private``, feats and visible are copies (a backward pass
+        keeps them)."""
         n = arrays[0].shape[0]
         key = (cam.tobytes(), width, height, near, low_pass, n)
         entry = self.entries.pop(key, None)   # re-entered only once projected
