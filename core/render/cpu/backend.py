@@ -55,18 +55,20 @@ class _RasterizeCPU(torch.autograd.Function):
     def backward(ctx, g_c, g_d, g_a):
         (arrays, cam, width, height, proj, visible, order, feats, offsets, ids,
          out_a, out_n, rows) = ctx.saved
-        grads = np.zeros((numba.get_num_threads(), feats.shape[0], rk.NF), np.float32)
-        rk.blend_backward(feats, offsets, ids, width, height, out_a, out_n,
-                          _grad(g_c, (height, width, 3)), _grad(g_d, (height, width)),
-                          _grad(g_a, (height, width)), grads)
-        g_proj = np.zeros_like(proj)
-        rk.sum_thread_grads(grads, order, g_proj)
-        outs = [np.empty_like(a) for a in arrays]
-        means, quats, log_scales = arrays[:3]
+        wanted = np.zeros(0, np.bool_)
         if rows is not None:      # only these Gaussians' gradients are used
             wanted = np.zeros_like(visible)
             wanted[rows] = True
             visible = visible & wanted
+            wanted = wanted[order]
+        grads = np.zeros((numba.get_num_threads(), feats.shape[0], rk.NF), np.float32)
+        rk.blend_backward(feats, offsets, ids, width, height, out_a, out_n,
+                          _grad(g_c, (height, width, 3)), _grad(g_d, (height, width)),
+                          _grad(g_a, (height, width)), wanted, grads)
+        g_proj = np.zeros_like(proj)
+        rk.sum_thread_grads(grads, order, g_proj)
+        outs = [np.empty_like(a) for a in arrays]
+        means, quats, log_scales = arrays[:3]
         pk.project_backward(means, quats, log_scales, cam, width, height, proj, visible, g_proj,
                             *outs)
         result = [torch.from_numpy(g).to(device=device, dtype=dtype)

@@ -208,11 +208,14 @@ def blend_forward(feats, offsets, ids, width, height, out_c, out_d, out_a, out_n
 
 
 @kernel(parallel=True, fastmath=True)
-def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g_a, grads):
+def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g_a, wanted,
+                   grads):
     """Gradients w.r.t. ``feats`` summed into buffers ``grads`` (B, M, NF), buffer b over a
     fixed share of the tiles: a buffer per *thread* held whatever tiles that thread happened to
     run, so the float sums' order, and the gradients' last bits, changed from run to run on a
-    busy machine (two optimisations on the same inputs ended 0.005 deg apart)."""
+    busy machine (two optimisations on the same inputs ended 0.005 deg apart).
+    ``wanted`` (M,) bool, or empty for all: the Gaussians whose gradients are used; a tile
+    where none of them contributes is skipped (the others' gradients are then incomplete)."""
     tiles_x = (width + TILE_W - 1) // TILE_W
     tiles_y = (height + TILE_H - 1) // TILE_H
     stride = spread_stride(tiles_y)
@@ -240,6 +243,8 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
                     gpix[3, p], gpix[4, p] = g_d[i, j], g_a[i, j] * T[p]
                     last[p] = out_n[i, j]
                     k_end = max(k_end, out_n[i, j])
+            if wanted.shape[0] and not _any_of(wanted, ids, start, k_end):
+                continue
             for kk in range(k_end - 1, -1, -1):
                 g = ids[start + kk]
                 mx, my, ca, cb, cc = feats[g, 0], feats[g, 1], feats[g, 2], feats[g, 3], feats[g, 4]
@@ -296,6 +301,15 @@ def blend_backward(feats, offsets, ids, width, height, out_a, out_n, g_c, g_d, g
                 buf[g, 9] += s_d
                 buf[g, 10] += s_du
                 buf[g, 11] += s_dv
+
+
+@kernel
+def _any_of(wanted, ids, start, count):
+    """Whether any of the ``count`` tile-list entries from ``start`` is ``wanted``."""
+    for k in range(start, start + count):
+        if wanted[ids[k]]:
+            return True
+    return False
 
 
 @kernel
