@@ -164,6 +164,8 @@ def project_forward(means, quats, log_scales, opacity_logits, colors, cam, width
     mb, qb, sb = means.view(np.uint32), quats.view(np.uint32), log_scales.view(np.uint32)
     ob, cb = opacity_logits.reshape((-1, 1)).view(np.uint32), colors.view(np.uint32)
     for n in prange(means.shape[0]):
+        # `&`, not `and`: every input must be stored in ``seen``, or an input left at older bits
+        # could later match them while the row holds the projection of newer ones
         if recall and (_recall(seen, n, 0, mb) & _recall(seen, n, 3, qb) & _recall(seen, n, 7, sb)
                        & _recall(seen, n, 10, ob) & _recall(seen, n, 11, cb)):
             continue

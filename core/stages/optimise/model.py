@@ -226,8 +226,9 @@ class ArticulatedSplat:
     def grad_rows(self) -> torch.Tensor | None:
         """The Gaussians whose render gradients reach a parameter: a hardened model's parts'
         (the base's stay put, and the splat itself is not fitted), unless the cameras are
-        learnt (every Gaussian moves with its camera); None: all."""
-        if self.hard is None or self.refine_cameras or not torch.is_grad_enabled():
+        learnt (every Gaussian moves with its camera); None: all. (Without a backward pass
+        the renderer ignores them.)"""
+        if self.hard is None or self.refine_cameras:
             return None
         return self.members()[0]
 
