@@ -199,6 +199,34 @@ def test_colours_seen_from_a_camera_are_the_splats_sh():
     assert not np.allclose(seen[part].numpy(), baked[part].numpy(), atol=1e-3)
 
 
+def test_a_parts_brightness_scales_its_colours_only_where_it_has_moved():
+    """With shading on, a part away from its closed pose has its colours times exp(gain) at
+    that time, hard or soft; the base, a part at rest and time 0 keep the splat's; the gain
+    gets a gradient from a colour loss."""
+    from artgs.core.render.sh import C0
+    model = _small_model()
+    model.shading = True
+    model.harden()
+    sh = model.splat.sh[:, :1].clone()
+    model.states[0, 1] = 0.3                                     # joint 0 moved at time 1
+    model.gains = torch.tensor([[0.0, np.log(1.5)], [0.0, np.log(2.0)]],
+                               dtype=torch.float32).requires_grad_(True)
+    labels = model.labels()
+    out = model.shaded(sh, 1)
+    rgb, rgb_out = C0 * sh + 0.5, C0 * out + 0.5
+    p1, p2, base = (torch.as_tensor(labels == i) for i in (1, 2, 0))
+    np.testing.assert_allclose(rgb_out[p1].detach().numpy(), 1.5 * rgb[p1].numpy(), rtol=1e-5)
+    assert torch.equal(out[p2], sh[p2]) and torch.equal(out[base], sh[base])   # joint 1 at rest
+    assert torch.equal(model.shaded(sh, 0), sh)
+    rgb_out[p1].sum().backward()
+    assert float(model.gains.grad[0, 1]) > 0 and float(model.gains.grad[1, 1]) == 0
+    model.hard = None                                            # soft: the same for one-hot
+    soft = model.shaded(sh, 1)
+    np.testing.assert_allclose(soft.detach().numpy(), out.detach().numpy(), atol=2e-3)
+    model.shading = False
+    assert model.shaded(sh, 1) is sh
+
+
 # --- the stage -----------------------------------------------------------------------------------
 
 def test_recovers_perturbed_joints(cabinet, tmp_path):

@@ -40,6 +40,9 @@ class FitConfig:
     lr_states: float = 0.01
     lr_logits: float = 0.1
     lr_cameras: float = 0.001          # camera corrections (rad; object sizes)
+    shading: bool = True               # learn each part's brightness per time (model.shaded)
+    lr_gains: float = 0.02             # log brightness
+    lambda_gain: float = 0.01          # its prior (mean squared log brightness)
     lambda_camera: float = 1e-3        # their prior, in units of 1 degree and 1 % of the size
     lr_final: float = 0.05             # learning rates decay exponentially to this fraction
     widen: float = 10.0                # robust sigmas at the start of the coarse phase, x
@@ -89,7 +92,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     size = model.size
     lrs = {"axes": cfg.lr_axes * lr_scale, "origins": cfg.lr_origins * size * lr_scale,
            "states": cfg.lr_states * lr_scale, "logits": cfg.lr_logits,
-           "cameras": cfg.lr_cameras * lr_scale}
+           "cameras": cfg.lr_cameras * lr_scale, "gains": cfg.lr_gains * lr_scale}
     params = model.params()
     opt = Adam(params, {k: lrs[k] for k in params}, eps=1e-12)
     model.load(opt.params)
@@ -115,13 +118,17 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
             + cfg.lambda_temporal * model.temporal()
         if prior is not None and cfg.lambda_prior:
             loss = loss + cfg.lambda_prior * model.prior(prior)
+        if model.shading:
+            loss = loss + cfg.lambda_gain * model.gain_prior()
         if model.refine_cameras:
             loss = loss + cfg.lambda_camera * model.camera_prior(np.radians(1.0), 0.01)
         opt.zero_grad()
         loss.backward()
         if free is not None and "cameras" in opt.params:   # one joint's hypothesis: cameras stay
             opt.params["cameras"].grad = None
-        for name in ("axes", "origins", "states"):
+        for name in ("axes", "origins", "states", "gains"):
+            if name not in opt.params:
+                continue
             g = opt.params[name].grad
             if g is not None:
                 g.mul_(mask.view(-1, *([1] * (g.ndim - 1))))

@@ -181,6 +181,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
                              [is_locked(j) for j in joints])
     trust = torch.tensor([USER_TRUST if j.source == "user" else 0.0 for j in joints],
                          dtype=torch.float32, device=dev)
+    model.shading = cfg.shading
     if options.cameras:
         model.use_cameras(frames.camera)
     run = Runner(model, frames, cfg, progress, options, trust)
