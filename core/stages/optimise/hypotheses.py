@@ -23,7 +23,7 @@ import torch
 from ...geometry.rigid import JointFit, fit_both, kabsch
 from .fit import evaluate, part_level, score_level, search_states
 from .kinematics import PRISMATIC, REVOLUTE
-from .model import ArticulatedSplat, restore, snapshot
+from .model import ArticulatedSplat, restore, snapshot, unshaded
 from .plausible import HIDDEN_SHARE, into_body
 from .seen import seen_moving
 
@@ -530,15 +530,16 @@ def remove_spurious(run, locked: list[bool]) -> list[str]:
             k += 1
             continue
         ids = moving_frames(model, frames, k)
-        here = evaluate(model, frames, cfg)
-        snap = snapshot(model)
-        with torch.no_grad():
-            model.states = model.states.clone()
-            model.states[k] = 0.0
-        rest = evaluate(model, frames, cfg)
-        restore(model, snap)
-        with vanished(model, k):
-            gone = evaluate(model, frames, cfg)
+        with unshaded(model):
+            here = evaluate(model, frames, cfg)
+            snap = snapshot(model)
+            with torch.no_grad():
+                model.states = model.states.clone()
+                model.states[k] = 0.0
+            rest = evaluate(model, frames, cfg)
+            restore(model, snap)
+            with vanished(model, k):
+                gone = evaluate(model, frames, cfg)
         worse = [(what, loss) for what, loss in (("at rest", rest), ("gone", gone))
                  if not clearly_better(loss, here, ids)]
         if worse:

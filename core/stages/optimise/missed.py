@@ -10,7 +10,7 @@ from .fit import evaluate, part_level, search_states
 from .hypotheses import (REMOVE_TOL, clearly_better, hidden_share, hinge_lines, key_time,
                          part_normal, part_points, score_at, state_candidates)
 from .kinematics import PRISMATIC, REVOLUTE
-from .model import ArticulatedSplat, restore, snapshot
+from .model import ArticulatedSplat, restore, snapshot, unshaded
 from .plausible import HIDDEN_SHARE, little_motion, off_part
 from .seen import unexplained
 
@@ -82,7 +82,8 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             break
         members = np.zeros(model.splat.n, bool)
         members[flagged[g]] = True
-        before_frames = evaluate(model, frames, cfg)
+        with unshaded(model):
+            before_frames = evaluate(model, frames, cfg)
         before = float(before_frames.mean())
         kept = snapshot(model)
         name = f"part_{len(model.names) + 1}"
@@ -113,7 +114,8 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             run.run_fit(steps, f"new part {name} as {kind}", share / tries / 2,
                         free=[i == k for i in range(model.k)], coarse=cfg.coarse,
                         coarse_level=part_level(model, frames, k))
-            after_frames = evaluate(model, frames, cfg)
+            with unshaded(model):
+                after_frames = evaluate(model, frames, cfg)
             after = float(after_frames.mean())
             # a part the optimisation invents has only the loss it lowers as evidence: over
             # all frames, not on the frames it picks itself (the local test is for proposals)

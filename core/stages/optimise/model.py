@@ -10,7 +10,9 @@ pinned to 0 (the canonical splat is the closed object). Locked joints keep their
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import Iterator
 
 import numpy as np
 import torch
@@ -418,6 +420,19 @@ class ArticulatedSplat:
         self.names.append(name)
         self.types.append(kind)
         return self.k - 1
+
+
+@contextmanager
+def unshaded(model: ArticulatedSplat) -> Iterator[None]:
+    """The model without its parts' brightness (:meth:`ArticulatedSplat.shaded`) for the
+    duration: whether a part exists is decided by its motion alone (a brightness per time is
+    free to explain exposure drift or a shadow on a piece that does not move)."""
+    before = model.shading
+    model.shading = False
+    try:
+        yield
+    finally:
+        model.shading = before
 
 
 def snapshot(model: ArticulatedSplat) -> tuple:
