@@ -144,7 +144,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         model.reassign(model.labels() == k + 1, into + 1)
         model.drop(k)
         run.trust = run.trust[:-1]
-        restore(model, (fitted[0][:-1], fitted[1][:-1], fitted[2][:-1], fitted[3][:-1]))
+        restore(model, tuple(part[:-1] for part in fitted))    # every joint's but the last
     return added
 
 def implausible(model: ArticulatedSplat, k: int) -> str | None:
