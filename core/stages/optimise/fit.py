@@ -40,10 +40,10 @@ class FitConfig:
     lr_states: float = 0.01
     lr_logits: float = 0.1
     lr_cameras: float = 0.001          # camera corrections (rad; object sizes)
+    lambda_camera: float = 1e-3        # their prior, in units of 1 degree and 1 % of the size
     shading: bool = True               # learn each part's brightness per time (model.shaded)
     lr_gains: float = 0.02             # log brightness
     lambda_gain: float = 0.01          # its prior (mean squared log brightness)
-    lambda_camera: float = 1e-3        # their prior, in units of 1 degree and 1 % of the size
     lr_final: float = 0.05             # learning rates decay exponentially to this fraction
     widen: float = 10.0                # robust sigmas at the start of the coarse phase, x
     coarse: float = 0.4                # fraction of the first fit's steps at the coarsest level
