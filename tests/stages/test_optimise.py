@@ -341,17 +341,6 @@ def test_type_chosen_by_evidence(cabinet, tmp_path):
             ev[f"loss_{t}"] for t in allowed), ev
 
 
-def test_a_start_clearly_behind_its_rival_is_not_fitted_in_full():
-    """A probe more than FIT_MARGIN worse than the best rival that keeps its part out of the
-    body is not fitted in full; a rival that opens into the body counts only when all do."""
-    from artgs.core.stages.optimise.hypotheses import FIT_MARGIN, clearly_behind
-
-    assert clearly_behind(1.0 + 2 * FIT_MARGIN, [(1.0, False)])
-    assert not clearly_behind(1.0 + FIT_MARGIN / 2, [(1.0, False)])
-    assert not clearly_behind(1.0 + 2 * FIT_MARGIN, [(1.0, True), (1.0 + FIT_MARGIN, False)])
-    assert clearly_behind(1.0 + 2 * FIT_MARGIN, [(1.0, True), (1.1, True)])
-
-
 def test_hinge_across_the_door_restarts(cabinet, tmp_path):
     """The door proposed as a hinge 90 degrees off (across the door, through its centre): out
     of the fit's reach, a restart from the part's box edges puts it back on its hinge line."""

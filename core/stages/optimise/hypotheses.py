@@ -37,10 +37,6 @@ SIGNIFICANT = 3.0
 PROBES = 3
 #: A probe's steps: the fit's iterations over this.
 PROBE_DIVISOR = 6
-#: A probe whose image loss exceeds the best start's (the current fit, or the other probe) by
-#: more than this share is not fitted in full (its probe stands for it): on the benchmark sets a
-#: full fit lowered its probe's loss by at most 6 % of the current fit's.
-FIT_MARGIN = 0.1
 #: Hypotheses within this angle of each other (either sign) and, revolute, on lines within
 #: ``SAME_LINE`` of the object's size are one start (:func:`distinct`): a fit's basin spans
 #: 10-30 deg (the basin benchmark), so closer starts probe one basin twice.
@@ -347,10 +343,8 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
     proposal's joint of the other type, :func:`alternative_of`, :func:`hypotheses_of`) are
     scored by rendering at half resolution at the time the part moves most (its value
     searched). The best few of each type are probed by short fits (:func:`probe`), and the
-    best probe of each type is fitted (coarse-to-fine with only this joint free) unless it is
-    already clearly worse than the current fit or the other type's probe (``FIT_MARGIN``; its
-    probe then stands for its type): of the other type, and of the joint's own type as a
-    restart (a
+    best probe of each type is fitted (coarse-to-fine with only this joint free): of the other
+    type, and of the joint's own type as a restart (a
     hinge proposed on the wrong edge, or one the main fit could not carry far enough: a PartNet
     oven's hinge proposed 0.9 deg but 9 cm off stayed in a basin that a slide beat, 0.5488
     against 0.5393, while the restart from its box edge reached 0.5387 and 1.5 deg / 1.0 cm).
@@ -365,9 +359,8 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
     slide on 0.05 %, 46 deg off). Returns per joint the evidence: each type's loss, the kept
     type, the relative margin between the types, whether a restart of its own type was kept,
     and the types whose every fit opened the part into the body (:func:`into_space`; each
-    type's loss is over the fits that did not, where it has any), and the types only probed. A
-    fit that opens its part into the body, and explains the frames better than every fit that
-    does not, is also fitted again from its states turned outwards (:func:`turn_outwards`): where
+    type's loss is over the fits that did not, where it has any). A fit that opens its part into
+    the body is also fitted again from its states turned outwards (:func:`turn_outwards`): where
     the frames show the body's inside, the part hidden in it costs little there and a fit can
     land on it (a test cabinet's door, fitted on the right hinge line with its last states
     swung inwards, lost to a slide into the body and was dropped; turned, 2.5 deg / 0.5 cm).
@@ -404,32 +397,20 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
                 run.progress.check_cancel()
         # (per-frame loss, state, type, restart, opens into the body)
         fitted = [(here, kept, own, False, hidden_share(run, k) > HIDDEN_SHARE)]
-        starts = {}            # per type: (probe's state, its loss, opens into the body, label)
         for kind in (other, own):
-            if kind in scored:
-                label = f"{name} as {kind}" if kind != own else f"{name} restarted"
-                starts[kind] = probe(run, k, kind, scored[kind], ids, label,
-                                     share / len(todo) / 4) + (label,)
-        level = score_level(frames)
-        rivals = [(float(evaluate(model, frames, cfg, level, ids).mean()), fitted[0][4])] + \
-            [(loss, hidden) for _, loss, hidden, _ in starts.values()]
-        probed_only = []
-        for kind, (start, loss, hidden, label) in starts.items():
+            if kind not in scored:
+                continue
+            label = f"{name} as {kind}" if kind != own else f"{name} restarted"
+            start = probe(run, k, kind, scored[kind], ids, label, share / len(todo) / 4)
             restore(model, start)
-            if clearly_behind(loss, rivals):         # its probe stands for it
-                fitted.append((evaluate(model, frames, cfg, 0, ids), start, kind, kind == own,
-                               hidden))
-                probed_only.append(kind)
-                run.done += share / len(todo) / 4
-            else:
-                run.run_fit(steps, label, share / len(todo) / 4,
-                            free=[i == k for i in range(model.k)], coarse=cfg.coarse,
-                            coarse_level=part_level(model, frames, k))
-                fitted.append((evaluate(model, frames, cfg, 0, ids), snapshot(model), kind,
-                               kind == own, hidden_share(run, k) > HIDDEN_SHARE))
+            run.run_fit(steps, label, share / len(todo) / 4,
+                        free=[i == k for i in range(model.k)], coarse=cfg.coarse,
+                        coarse_level=part_level(model, frames, k))
+            per_frame = evaluate(model, frames, cfg, 0, ids)
+            fitted.append((per_frame, snapshot(model), kind, kind == own,
+                           hidden_share(run, k) > HIDDEN_SHARE))
             restore(model, kept)
-        legal = [float(f[0].mean()) for f in fitted if not f[4]]
-        for f in [f for f in fitted if f[4] and float(f[0].mean()) < min(legal, default=np.inf)]:
+        for f in [f for f in fitted if f[4]]:
             restore(model, f[1])
             if turn_outwards(run, k):
                 run.run_fit(steps, f"{name} turned outwards", 0.0,
@@ -450,33 +431,25 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
         margin = (hi - lo) / max(lo, 1e-12)
         evidence[name] = {f"loss_{t}": round(v, 6) for t, v in losses.items()}
         evidence[name].update(type=kind, margin=round(margin, 6), restarted=restarted,
-                              into_body=sorted(inward), probed_only=probed_only)
+                              into_body=sorted(inward))
         run.progress.log(f"{name}: {kind}{' (restarted from a box edge)' if restarted else ''}"
                          " (image loss " + ", ".join(f"{v:.4f} {t}" for t, v in losses.items())
                          + ")")
     return evidence
 
-def clearly_behind(loss: float, rivals: list[tuple[float, bool]]) -> bool:
-    """Whether ``loss`` exceeds by more than ``FIT_MARGIN`` the lowest of ``rivals`` (image
-    loss, opens its part into the body) that does not open its part into the body (of all of
-    them when each does): a start that a full fit will not carry past its rival."""
-    best = min([loss for loss, hidden in rivals if not hidden] or [r[0] for r in rivals])
-    return loss > best * (1 + FIT_MARGIN)
-
 def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: str,
-          share: float) -> tuple[tuple, float, bool]:
+          share: float) -> tuple:
     """The start of joint ``k``'s fit as ``kind``: of its ``PROBES`` best-scored hypotheses
     ``(loss, axis, point)``, each with its states searched and a short fit at the part's coarse
-    level (only this joint free), the one then explaining the moving frames ``ids`` best: its
-    model state (:func:`snapshot`; the model is left as it was), its image loss there at
-    :func:`score_level`, and whether it opens the part into the body. One render at one time ranks
+    level (only this joint free), the one then explaining the moving frames ``ids`` best (model
+    state, :func:`snapshot`; the model is left as it was). One render at one time ranks
     hypotheses by margins of 0.2 %: on a tight oven the hinge 58 deg off scored 0.6710 and the
     true one 0.6725, and the fit from the first never reached the second's basin (:func:`probed`)."""
     model, frames, cfg = run.model, run.frames, run.cfg
     kept = snapshot(model)
     level = part_level(model, frames, k)
     steps = max(run.options.iterations // PROBE_DIVISOR, 1)
-    best: tuple[tuple[bool, float], tuple] | None = None     # ((into the body, loss), state)
+    best: tuple[float, tuple] | None = None     # (loss, state)
     top = probed(sorted(scored, key=lambda h: h[0]), kind, model.size)
     for _, axis, point in top:
         model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
@@ -491,8 +464,7 @@ def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: st
         restore(model, kept)
     if len(top) <= 1:
         run.done += share
-    (hidden, loss), state = best
-    return state, loss, hidden
+    return best[1]
 
 def probed(ranked: list[tuple], kind: str, size: float) -> list[tuple]:
     """The hypotheses ``(loss, axis, point)``, in rank order, that are probed: the ``PROBES``
