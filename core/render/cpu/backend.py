@@ -61,7 +61,7 @@ class _RasterizeCPU(torch.autograd.Function):
             wanted[rows] = True
             visible = visible & wanted
             wanted = wanted[order]
-        grads = np.zeros((numba.get_num_threads(), feats.shape[0], rk.NF), np.float32)
+        grads = np.zeros((grad_buffers(), feats.shape[0], rk.NF), np.float32)
         rk.blend_backward(feats, offsets, ids, width, height, out_a, out_n,
                           _grad(g_c, (height, width, 3)), _grad(g_d, (height, width)),
                           _grad(g_a, (height, width)), wanted, grads)
@@ -119,6 +119,19 @@ class Projections:
 
 
 PROJECTIONS = Projections()
+
+
+#: The fewest gradient buffers of a backward pass (:func:`grad_buffers`).
+MIN_GRAD_BUFFERS = 2
+
+
+def grad_buffers() -> int:
+    """Buffers the backward pass sums its tiles' gradients into: one per thread, at least
+    ``MIN_GRAD_BUFFERS``. The buffers fix the float sums' order, so a render's gradients are the
+    same to the bit with one thread or two: the optimisation runs parts of its work in two
+    one-thread processes (core/stages/optimise/parallel.py) and ends where one two-thread
+    process does."""
+    return max(MIN_GRAD_BUFFERS, numba.get_num_threads())
 
 
 def _grad(g: torch.Tensor | None, shape) -> np.ndarray:

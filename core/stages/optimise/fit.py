@@ -98,7 +98,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     model.load(opt.params)
     mask = torch.ones(model.k, device=dev) if free is None else \
         torch.tensor(free, dtype=torch.float32, device=dev)
-    pool = list(range(len(frames.times))) if times is None else list(times)
+    pool = time_pool(frames, times)
     coarse_level = len(frames.levels) - 1 if coarse_level is None else coarse_level
     n_coarse = int(coarse * steps)
     losses: list[float] = []
@@ -110,7 +110,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         level = coarse_level if in_coarse else 0
         # graduated robustness: the coarse phase starts L1-like (wide basin) and tightens
         widen = cfg.widen ** (1 - step / n_coarse) if in_coarse else 1.0
-        ti = int(rng.choice(pool))
+        ti = draw_time(rng, pool)
         ids = frames.at_time(ti)
         loss = sum(frame_loss(model, frames, level, i, cfg, widen) for i in ids) / max(len(ids), 1)
         smooth, entropy = model.skin_regularisers()
@@ -140,6 +140,25 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     model.load({k: v.detach() for k, v in opt.params.items()})
     tail = losses[-max(1, steps // 4):]
     return float(np.mean(tail))
+
+
+def time_pool(frames: FrameSet, times: list[int] | None) -> list[int]:
+    """The time indices a fit samples its steps from (``times``, default all)."""
+    return list(range(len(frames.times))) if times is None else list(times)
+
+
+def draw_time(rng: np.random.Generator, pool: list[int]) -> int:
+    """A fit step's time index (the fit's only use of ``rng``)."""
+    return int(rng.choice(pool))
+
+
+def skip_draws(rng: np.random.Generator, frames: FrameSet, steps: int,
+               times: list[int] | None = None) -> None:
+    """Advance ``rng`` as a fit of ``steps`` steps over ``times`` would (:func:`fit` run
+    elsewhere, in a helper process, from the same generator state)."""
+    pool = time_pool(frames, times)
+    for _ in range(steps):
+        draw_time(rng, pool)
 
 
 @torch.no_grad()

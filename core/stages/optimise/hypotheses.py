@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from ...geometry.rigid import JointFit, fit_both, kabsch
-from .fit import evaluate, part_level, score_level, search_states
+from .fit import evaluate, part_level, score_level, search_states, skip_draws
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot, unshaded
 from .plausible import HIDDEN_SHARE, into_body
@@ -384,32 +384,15 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
         kept = snapshot(model)
         here = evaluate(model, frames, cfg, 0, ids)
         key = key_time(model, frames, cfg, k)
+        flat = [h for options in hyps.values() for h in options]
         scored: dict[str, list[tuple]] = {}
-        for kind, options in hyps.items():
-            for _, axis, point, values in options:
-                model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
-                grid = state_candidates(model, k)
-                if values is not None:
-                    grid = np.append(grid, values[key])
-                loss = score_at(model, frames, cfg, k, key, grid)[0]
-                scored.setdefault(kind, []).append((loss, axis, point))
-                restore(model, kept)
-                run.progress.check_cancel()
+        for (kind, axis, point, _), loss in zip(flat, score_all(run, k, key, flat)):
+            scored.setdefault(kind, []).append((loss, axis, point))
         # (per-frame loss, state, type, restart, opens into the body)
         fitted = [(here, kept, own, False, hidden_share(run, k) > HIDDEN_SHARE)]
-        for kind in (other, own):
-            if kind not in scored:
-                continue
-            label = f"{name} as {kind}" if kind != own else f"{name} restarted"
-            start = probe(run, k, kind, scored[kind], ids, label, share / len(todo) / 4)
-            restore(model, start)
-            run.run_fit(steps, label, share / len(todo) / 4,
-                        free=[i == k for i in range(model.k)], coarse=cfg.coarse,
-                        coarse_level=part_level(model, frames, k))
-            per_frame = evaluate(model, frames, cfg, 0, ids)
-            fitted.append((per_frame, snapshot(model), kind, kind == own,
-                           hidden_share(run, k) > HIDDEN_SHARE))
-            restore(model, kept)
+        branches = [(k, kind, own, scored[kind], ids, share / len(todo) / 4, steps)
+                    for kind in (other, own) if kind in scored]
+        fitted += fit_types(run, branches)
         for f in [f for f in fitted if f[4]]:
             restore(model, f[1])
             if turn_outwards(run, k):
@@ -436,6 +419,79 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
                          " (image loss " + ", ".join(f"{v:.4f} {t}" for t, v in losses.items())
                          + ")")
     return evidence
+
+def score_hypotheses(run, k: int, key: int, hyps: list[tuple]) -> list[float]:
+    """Per hypothesis ``(type, axis, point, values or None)`` of joint ``k``: its lowest image
+    loss at time index ``key`` over the state candidates (and its own value there), by
+    :func:`score_at`; leaves the model as it was."""
+    model = run.model
+    kept = snapshot(model)
+    losses = []
+    for kind, axis, point, values in hyps:
+        model.set_type(k, kind, axis, point, np.zeros(len(run.frames.times)))
+        grid = state_candidates(model, k)
+        if values is not None:
+            grid = np.append(grid, values[key])
+        losses.append(score_at(model, run.frames, run.cfg, k, key, grid)[0])
+        restore(model, kept)
+        run.progress.check_cancel()
+    return losses
+
+def score_all(run, k: int, key: int, hyps: list[tuple]) -> list[float]:
+    """:func:`score_hypotheses` of ``hyps``: the first half in the helper process, where there
+    is one (:mod:`.parallel`), the rest here at once (the same losses as one process)."""
+    from . import parallel
+    helper = parallel.helper(run) if len(hyps) > 1 else None
+    if helper is None:
+        return score_hypotheses(run, k, key, hyps)
+    half = len(hyps) // 2
+    a, b = helper.call(run, score_hypotheses, (k, key, hyps[:half]),
+                       lambda: score_hypotheses(run, k, key, hyps[half:]))
+    return a + b
+
+def fit_type(run, k: int, kind: str, own: str, scored: list[tuple], ids: list[int],
+             share: float, steps: int) -> tuple:
+    """Joint ``k`` fitted as ``kind`` from the best of its ``scored`` hypotheses
+    (:func:`probe`, then ``steps`` of a coarse-to-fine fit with only this joint free): (its
+    losses over the frames ``ids``, its state, ``kind``, whether it restarts the joint's own
+    type ``own``, whether it opens the part into the body). Reports progress for twice
+    ``share``; leaves the model as it was."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    kept = snapshot(model)
+    name = model.names[k]
+    label = f"{name} as {kind}" if kind != own else f"{name} restarted"
+    start = probe(run, k, kind, scored, ids, label, share)
+    restore(model, start)
+    run.run_fit(steps, label, share, free=[i == k for i in range(model.k)], coarse=cfg.coarse,
+                coarse_level=part_level(model, frames, k))
+    fitted = (evaluate(model, frames, cfg, 0, ids), snapshot(model), kind, kind == own,
+              hidden_share(run, k) > HIDDEN_SHARE)
+    restore(model, kept)
+    return fitted
+
+def fit_draws(run, kind: str, scored: list[tuple], steps: int) -> int:
+    """How many times :func:`fit_type` draws from the run's random generator: a draw per fit
+    step, of the probes' short fits (when more than one is probed) and of the full fit."""
+    top = probed(sorted(scored, key=lambda h: h[0]), kind, run.model.size)
+    probe_steps = max(run.options.iterations // PROBE_DIVISOR, 1)
+    return (len(top) * probe_steps if len(top) > 1 else 0) + steps
+
+def fit_types(run, branches: list[tuple]) -> list[tuple]:
+    """:func:`fit_type` of each of ``branches`` (its arguments after ``run``), in order: with
+    two and a helper process (:mod:`.parallel`), the first there and the second here at once,
+    with the same results and random draws as one after the other."""
+    from . import parallel
+    helper = parallel.helper(run) if len(branches) == 2 else None
+    if helper is None:
+        return [fit_type(run, *b) for b in branches]
+    first, second = branches
+
+    def here() -> tuple:     # runs once the helper has the generator's state
+        skip_draws(run.rng, run.frames, fit_draws(run, first[1], first[3], first[6]))
+        run.done += 2 * first[5]
+        return fit_type(run, *second)
+
+    return list(helper.call(run, fit_type, first, here))
 
 def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: str,
           share: float) -> tuple:

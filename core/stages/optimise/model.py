@@ -155,6 +155,18 @@ class ArticulatedSplat:
                                    device=self.axes.device)
         self.refine_cameras = True
 
+    #: What never changes after construction (:meth:`state` leaves it out).
+    FIXED = ("splat", "size", "times", "neighbours")
+
+    def state(self) -> dict:
+        """Everything an optimisation changes (joints, states, parts, cameras, flags), for
+        :meth:`set_state` on a copy of this model in another process."""
+        return {k: v for k, v in vars(self).items() if k not in self.FIXED}
+
+    def set_state(self, state: dict) -> None:
+        """Take over the :meth:`state` of a copy of this model."""
+        vars(self).update(state)
+
     def load(self, params: dict[str, torch.Tensor]) -> None:
         """Take the optimiser's tensors as the current values."""
         for name, value in params.items():

@@ -30,7 +30,7 @@ from __future__ import annotations
 import io
 import math
 import time
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -99,6 +99,9 @@ class Runner:
         self.alternatives: dict[str, list] = {}
         #: where the static views measured the body (plausible.open_space), None without depth
         self.space: OpenSpace | None = None
+        #: the helper process of the type choice's fits (core/stages/optimise/parallel.py)
+        self.helper = None
+        self.processes = 1     # 2 once the helper fitted
 
     def run_fit(self, steps: int, phase: str, share: float, **kw: Any) -> float:
         """A fit that reports progress for ``share`` of the stage."""
@@ -146,13 +149,14 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
              config: FitConfig | None = None) -> dict[str, Any]:
     """Optimise the proposals of ``out`` against ``capture``; writes the outputs (module doc).
     The same inputs and seed give the same outputs (:func:`deterministic`)."""
-    with deterministic():
-        return _optimise(out, capture, progress, options, config)
+    with deterministic(), ExitStack() as closing:
+        return _optimise(out, capture, progress, options, config, closing)
 
 
 def _optimise(out: Path | str, capture: Capture, progress: Progress,
-              options: OptimiseOptions | None, config: FitConfig | None) -> dict[str, Any]:
-    from . import assign, hypotheses, missed, seen
+              options: OptimiseOptions | None, config: FitConfig | None,
+              closing: ExitStack) -> dict[str, Any]:
+    from . import assign, hypotheses, missed, parallel, seen
 
     options = options or OptimiseOptions()
     cfg = config or FitConfig()
@@ -187,6 +191,9 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     run = Runner(model, frames, cfg, progress, options, trust)
     run.space = space
     run.alternatives = {j.name: hypotheses.alternative_of(j, frames.times) for j in joints}
+    if options.types and joints:
+        parallel.start(run)
+        closing.callback(parallel.stop, run)
     n = options.iterations
     progress.log(f"optimise: {len(joints)} joint(s), {splat.n} Gaussians, "
                  f"{len(frames.time_index)} frames at {len(frames.times)} times, "
@@ -257,7 +264,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
                "cameras": camera_corrections(model),
                "kept_start": kept_start, "added": added, "rejected": rejected,
                "depth": depth,
-               "types": [j.type for j in result],
+               "types": [j.type for j in result], "processes": run.processes,
                "seconds": round(time.perf_counter() - t0, 2)}
     write_labels(out / layout.PART_LABELS, model.labels())
     write_articulation(out / layout.ARTICULATION, articulation)
