@@ -297,7 +297,7 @@ def test_same_inputs_same_outputs(cabinet, tmp_path):
 
 
 def test_a_helper_process_gives_the_same_result(cabinet, tmp_path):
-    """The type choice's second fit in a helper process (``workers`` 2, two threads here) ends
+    """The type choice's second fit in a helper process (``helper``, two threads here) ends
     where one process does: same parts and types, joints within the runs' 1e-3 degrees and
     1e-5 m (fails when the helper's fit draws other random times than it would here, or
     starts from another state)."""
@@ -308,12 +308,12 @@ def test_a_helper_process_gives_the_same_result(cabinet, tmp_path):
     threads = torch.get_num_threads()
     torch.set_num_threads(2)
     try:
-        for workers in (1, 2):
-            (tmp_path / str(workers)).mkdir()
-            out = _out(tmp_path / str(workers), cabinet, start)
+        for helper in (False, True):
+            (tmp_path / str(helper)).mkdir()
+            out = _out(tmp_path / str(helper), cabinet, start)
             figures = optimise(out, load_capture(cabinet), QUIET,
-                               OptimiseOptions(iterations=40, workers=workers))
-            assert figures["processes"] == workers
+                               OptimiseOptions(iterations=40, helper=helper))
+            assert figures["processes"] == 1 + helper
             runs.append(((out / layout.PART_LABELS).read_bytes(),
                          read_articulation(out / layout.ARTICULATION)))
     finally:

@@ -117,9 +117,9 @@ def threads(n: int) -> Iterator[None]:
 
 
 def start(run) -> None:
-    """Start the run's helper in the background when it would pay: two workers asked for, CPU
+    """Start the run's helper in the background when it would pay: asked for (``helper``), CPU
     tensors, two or more threads here. Its start overlaps the first fit."""
-    if (run.options.workers >= 2 and run.model.axes.device.type == "cpu"
+    if (run.options.helper and run.model.axes.device.type == "cpu"
             and torch.get_num_threads() >= 2):
         try:
             run.helper = Helper(run)
