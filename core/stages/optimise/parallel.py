@@ -19,7 +19,6 @@ from __future__ import annotations
 import multiprocessing
 import pickle
 import signal
-import time
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator
 
@@ -35,21 +34,22 @@ POLL = 0.2
 START_TIMEOUT = 120.0
 
 
-def _start(payload: bytes, threads: int) -> None:
-    """Helper process initializer: its threads, deterministic kernels, the Runner rebuilt."""
-    global _RUN
-    from .stage import Runner
+def _start(threads: int) -> None:
+    """Helper process initializer: its threads and deterministic kernels."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)      # the parent cancels and ends the helper
     torch.set_num_threads(threads)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     torch.use_deterministic_algorithms(True, warn_only=True)
+
+
+def _load(payload: bytes) -> bool:
+    """The helper's first task: the Runner rebuilt from the parent's."""
+    global _RUN
+    from .stage import Runner
     model, frames, cfg, options, trust, space = pickle.loads(payload)
     _RUN = Runner(model, frames, cfg, Progress("quiet"), options, trust)
     _RUN.space = space
-
-
-def _ready() -> bool:
-    return _RUN is not None
+    return True
 
 
 def _call(fn: Callable, blob: bytes) -> bytes:
@@ -70,16 +70,17 @@ class Helper:
         payload = pickle.dumps((m, run.frames, run.cfg, run.options, run.trust, run.space))
         self.threads = max(torch.get_num_threads() // 2, 1)
         self.pool = multiprocessing.get_context("spawn").Pool(
-            1, initializer=_start, initargs=(payload, self.threads))
-        self.started = time.perf_counter()
+            1, initializer=_start, initargs=(self.threads,))
+        # queued: the pool's own thread sends it while this one goes on with the first fit
+        self.loaded = self.pool.apply_async(_load, (payload,))
         self.checked = False
 
     def ready(self) -> bool:
-        """Wait until the helper has started; False when it does not within the timeout (a
-        helper whose start fails is started again and again by the pool, never ready)."""
+        """Wait until the helper has its copy of the run; False when it does not within the
+        timeout (a helper whose start fails is started again and again by the pool)."""
         if not self.checked:
             try:
-                self.checked = bool(self.pool.apply_async(_ready).get(START_TIMEOUT))
+                self.checked = bool(self.loaded.get(START_TIMEOUT))
             except Exception:   # noqa: BLE001 - timeout or a broken pool: not ready
                 self.checked = False
         return self.checked
