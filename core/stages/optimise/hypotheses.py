@@ -393,15 +393,14 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
         branches = [(k, kind, own, scored[kind], ids, share / len(todo) / 4, steps)
                     for kind in (other, own) if kind in scored]
         fitted += fit_types(run, branches)
+        turned = []
         for f in [f for f in fitted if f[4]]:
             restore(model, f[1])
             if turn_outwards(run, k):
-                run.run_fit(steps, f"{name} turned outwards", 0.0,
-                            free=[i == k for i in range(model.k)], coarse=cfg.coarse,
-                            coarse_level=part_level(model, frames, k))
-                fitted.append((evaluate(model, frames, cfg, 0, ids), snapshot(model), f[2], f[3],
-                               hidden_share(run, k) > HIDDEN_SHARE))
+                turned.append((k, snapshot(model), f[2], f[3], ids, steps))
             restore(model, kept)
+        for pair in (turned[i:i + 2] for i in range(0, len(turned), 2)):
+            fitted += in_turn(run, refit, pair, steps)
         allowed = into_space(fitted)
         losses = {t: min(float(f[0].mean()) for f in allowed if f[2] == t)
                   for t in dict.fromkeys(f[2] for f in allowed)}
@@ -469,6 +468,22 @@ def fit_type(run, k: int, kind: str, own: str, scored: list[tuple], ids: list[in
     restore(model, kept)
     return fitted
 
+def refit(run, k: int, start: tuple, kind: str, restarted: bool, ids: list[int],
+          steps: int) -> tuple:
+    """Joint ``k`` fitted ``steps`` from ``start`` (:func:`snapshot`; a fit into the body
+    turned outwards) as :func:`fit_type` fits: the same result tuple; leaves the model as it
+    was."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    kept = snapshot(model)
+    restore(model, start)
+    run.run_fit(steps, f"{model.names[k]} turned outwards", 0.0,
+                free=[i == k for i in range(model.k)], coarse=cfg.coarse,
+                coarse_level=part_level(model, frames, k))
+    fitted = (evaluate(model, frames, cfg, 0, ids), snapshot(model), kind, restarted,
+              hidden_share(run, k) > HIDDEN_SHARE)
+    restore(model, kept)
+    return fitted
+
 def fit_draws(run, kind: str, scored: list[tuple], steps: int) -> int:
     """How many times :func:`fit_type` draws from the run's random generator: a draw per fit
     step, of the probes' short fits (when more than one is probed) and of the full fit."""
@@ -477,21 +492,32 @@ def fit_draws(run, kind: str, scored: list[tuple], steps: int) -> int:
     return (len(top) * probe_steps if len(top) > 1 else 0) + steps
 
 def fit_types(run, branches: list[tuple]) -> list[tuple]:
-    """:func:`fit_type` of each of ``branches`` (its arguments after ``run``), in order: with
-    two and a helper process (:mod:`.parallel`), the first there and the second here at once,
-    with the same results and random draws as one after the other."""
-    from . import parallel
-    helper = parallel.helper(run) if len(branches) == 2 else None
-    if helper is None:
+    """:func:`fit_type` of each of ``branches`` (its arguments after ``run``), in order
+    (:func:`in_turn`)."""
+    if len(branches) != 2:
         return [fit_type(run, *b) for b in branches]
-    first, second = branches
+    first = branches[0]
+    return in_turn(run, fit_type, branches, fit_draws(run, first[1], first[3], first[6]),
+                   2 * first[5])
 
-    def here() -> tuple:     # runs once the helper has the generator's state
-        skip_draws(run.rng, run.frames, fit_draws(run, first[1], first[3], first[6]))
-        run.done += 2 * first[5]
-        return fit_type(run, *second)
+def in_turn(run, fn: Callable, calls: list[tuple], draws: int, share: float = 0.0
+            ) -> list:
+    """``fn(run, *args)`` for each of ``calls`` (one or two) in order, each leaving the model
+    as it was: with two and a helper process (:mod:`.parallel`), the first there and the second
+    here at once, with the same results and random draws as one after the other (``draws``:
+    the first call's, ``share``: its progress)."""
+    from . import parallel
+    helper = parallel.helper(run) if len(calls) == 2 else None
+    if helper is None:
+        return [fn(run, *args) for args in calls]
+    first, second = calls
 
-    return list(helper.call(run, fit_type, first, here))
+    def here():     # runs once the helper has the generator's state
+        skip_draws(run.rng, run.frames, draws)
+        run.done += share
+        return fn(run, *second)
+
+    return list(helper.call(run, fn, first, here))
 
 def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: str,
           share: float) -> tuple:
