@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import multiprocessing
 import subprocess
 import sys
 from pathlib import Path
@@ -287,11 +288,12 @@ def test_same_inputs_same_outputs(cabinet, tmp_path):
     assert not torch.are_deterministic_algorithms_enabled()
 
 
-def _optimised(tmp_path: Path, cap: Path, start, options: OptimiseOptions) -> tuple:
+def _optimised(tmp_path: Path, cap: Path, start, options: OptimiseOptions,
+               progress: Progress = QUIET) -> tuple:
     """The part labels (bytes), articulation and figures of an optimisation from ``start``."""
     tmp_path.mkdir()
     out = _out(tmp_path, cap, start)
-    figures = optimise(out, load_capture(cap), QUIET, options)
+    figures = optimise(out, load_capture(cap), progress, options)
     return ((out / layout.PART_LABELS).read_bytes(), read_articulation(out / layout.ARTICULATION),
             figures)
 
@@ -307,25 +309,47 @@ def _assert_same(a: tuple, b: tuple) -> None:
         assert ja.extra.get("evidence") == jb.extra.get("evidence")
 
 
+class _KillHelper(Progress):
+    """Quiet progress that kills this process's children (the helper) once the type choice's
+    fit here has begun, while the helper fits its own."""
+
+    def __init__(self) -> None:
+        super().__init__("quiet")
+        self.killed = 0
+
+    def update(self, stage, fraction, message="", force=False, **figures):
+        if not self.killed and "restarted" in message:
+            for child in multiprocessing.active_children():
+                child.kill()
+                self.killed += 1
+        super().update(stage, fraction, message, force, **figures)
+
+
 def test_a_helper_process_gives_the_same_result(cabinet, tmp_path):
     """The type choice's second fit in a helper process (``helper``, two threads here) ends
     where one process does: same parts and types, joints within the runs' 1e-3 degrees and
     1e-5 m (fails when the helper's fit draws other random times than it would here, or
-    starts from another state)."""
+    starts from another state); and so does a run whose helper is killed mid-fit (its fit is
+    then made here)."""
     gt = read_articulation(cabinet / "gt.json")
     start = [_perturb(j, 10.0, 0.05, seed=3) for j in gt.joints]
     start[0].type = "prismatic" if start[0].type == "revolute" else "revolute"
     runs: list[tuple] = []
     threads = torch.get_num_threads()
     torch.set_num_threads(2)
+    killer = _KillHelper()
     try:
         for helper in (False, True):
             runs.append(_optimised(tmp_path / str(helper), cabinet, start,
                                    OptimiseOptions(iterations=40, helper=helper)))
             assert runs[-1][2]["processes"] == 1 + helper
+        killed = _optimised(tmp_path / "killed", cabinet, start,
+                            OptimiseOptions(iterations=40), killer)
     finally:
         torch.set_num_threads(threads)
     _assert_same(*runs)
+    assert killer.killed == 1
+    _assert_same(runs[0], killed)
 
 
 def test_cancel_leaves_out_as_before(cabinet, tmp_path):

@@ -73,31 +73,55 @@ class Helper:
             1, initializer=_start, initargs=(self.threads,))
         # queued: the pool's own thread sends it while this one goes on with the first fit
         self.loaded = self.pool.apply_async(_load, (payload,))
+        self.worker = self._workers()
         self.checked = False
+
+    def _workers(self) -> list[int]:
+        """The pool's worker pids: a worker that died (killed, out of memory) is replaced by
+        one without the run's copy, and its job never finishes."""
+        return [p.pid for p in self.pool._pool]   # noqa: SLF001 - Pool has no public accessor
+
+    def alive(self) -> bool:
+        """Whether the helper started at first is still the pool's worker."""
+        return self._workers() == self.worker and all(p.is_alive() for p in self.pool._pool)
 
     def ready(self) -> bool:
         """Wait until the helper has its copy of the run; False when it does not within the
-        timeout (a helper whose start fails is started again and again by the pool)."""
+        timeout or dies (a helper whose start fails is started again and again by the pool)."""
         if not self.checked:
-            try:
-                self.checked = bool(self.loaded.get(START_TIMEOUT))
-            except Exception:   # noqa: BLE001 - timeout or a broken pool: not ready
-                self.checked = False
+            waited = 0.0
+            while not self.loaded.ready() and self.alive() and waited < START_TIMEOUT:
+                self.loaded.wait(POLL)
+                waited += POLL
+            self.checked = (self.loaded.ready() and self.loaded.successful()
+                            and bool(self.loaded.get()))
         return self.checked
 
     def call(self, run, fn: Callable, args: tuple, here: Callable[[], Any]) -> tuple[Any, Any]:
         """``fn(run, *args)`` in the helper from the current model and generator state while
         ``here()`` runs in this process with the other threads; both results. Cancels
-        (Ctrl-C, the add-on) are checked while waiting."""
+        (Ctrl-C, the add-on) are checked while waiting. Should the helper die, its call is
+        made here afterwards, from the same state (the same result, later), and the helper is
+        not used again."""
         run.processes = 2
-        blob = pickle.dumps((run.model.state(), run.rng.bit_generator.state, args))
+        start = run.rng.bit_generator.state
+        blob = pickle.dumps((run.model.state(), start, args))
         job = self.pool.apply_async(_call, (fn, blob))
         with threads(torch.get_num_threads() - self.threads):
             mine = here()
-            while not job.ready():
+            while not job.ready() and self.alive():
                 run.progress.check_cancel()
                 job.wait(POLL)
-        return pickle.loads(job.get()), mine
+        if job.ready() and job.successful():
+            return pickle.loads(job.get()), mine
+        run.progress.log("optimise: the helper process ended; this one goes on alone",
+                         level="warning")
+        end = run.rng.bit_generator.state
+        run.rng.bit_generator.state = start
+        theirs = fn(run, *args)
+        run.rng.bit_generator.state = end
+        stop(run)
+        return theirs, mine
 
     def close(self) -> None:
         self.pool.terminate()
