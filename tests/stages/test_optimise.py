@@ -352,6 +352,25 @@ def test_a_helper_process_gives_the_same_result(cabinet, tmp_path):
     _assert_same(runs[0], killed)
 
 
+def test_a_helper_does_not_run_an_unguarded_script_again(tmp_path):
+    """A user's script without ``if __name__ == "__main__"`` that starts a helper the way the
+    optimisation does runs once (spawn would run it again in the helper, which then fails)."""
+    script = tmp_path / "unguarded.py"
+    script.write_text(
+        "import multiprocessing, os\n"
+        "print('MAIN RUN', flush=True)\n"
+        "from artgs.core.stages.optimise import parallel\n"
+        "with parallel.main_hidden():\n"
+        "    pool = multiprocessing.get_context('spawn').Pool(1, initializer=parallel._start,\n"
+        "                                                     initargs=(1,))\n"
+        "print('HELPER', pool.apply_async(os.getpid).get(120) != os.getpid(), flush=True)\n"
+        "pool.terminate()\n")
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                       timeout=300, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("MAIN RUN") == 1 and "HELPER True" in r.stdout, r.stdout
+
+
 def test_cancel_leaves_out_as_before(cabinet, tmp_path):
     gt = read_articulation(cabinet / "gt.json")
     out = _out(tmp_path, cabinet, gt.joints)

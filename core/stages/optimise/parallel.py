@@ -19,6 +19,7 @@ from __future__ import annotations
 import multiprocessing
 import pickle
 import signal
+import sys
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator
 
@@ -69,8 +70,9 @@ class Helper:
         m = run.model
         payload = pickle.dumps((m, run.frames, run.cfg, run.options, run.trust, run.space))
         self.threads = max(torch.get_num_threads() // 2, 1)
-        self.pool = multiprocessing.get_context("spawn").Pool(
-            1, initializer=_start, initargs=(self.threads,))
+        with main_hidden():
+            self.pool = multiprocessing.get_context("spawn").Pool(
+                1, initializer=_start, initargs=(self.threads,))
         # queued: the pool's own thread sends it while this one goes on with the first fit
         self.loaded = self.pool.apply_async(_load, (payload,))
         self.worker = self._workers()
@@ -126,6 +128,26 @@ class Helper:
     def close(self) -> None:
         self.pool.terminate()
         self.pool.join()
+
+
+@contextmanager
+def main_hidden() -> Iterator[None]:
+    """Spawn without the main module: a spawned process runs the parent's ``__main__`` again
+    (as ``__mp_main__``), and a user's script that calls the optimisation without an
+    ``if __name__ == "__main__"`` guard would run a second time in the helper. The helper needs
+    nothing from it (only this package's functions and data are sent)."""
+    main = sys.modules["__main__"]
+    saved = {k: vars(main)[k] for k in ("__file__", "__spec__") if k in vars(main)}
+    for k in saved:      # spawn reads __spec__'s name, else __file__
+        if k == "__spec__":
+            main.__spec__ = None
+        else:
+            del main.__file__
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            setattr(main, k, v)
 
 
 @contextmanager
