@@ -6,6 +6,7 @@ the numpy-only modules that import this one stay light in Blender's process.
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +63,12 @@ def read_rgb(s: FrameSpec) -> np.ndarray:
                      frame=s.label, field="file_path")
 
 
+#: np.load parses a .npy header with ast.literal_eval, which CPython 3.11 (up to 3.11.7 here)
+#: can fail in two threads at once ("SystemError: AST constructor recursion depth mismatch",
+#: seen once in the suite while a capture's frames loaded in a thread pool): one at a time.
+_NPY_HEADER = threading.Lock()
+
+
 def read_depth(s: FrameSpec, scale: float) -> np.ndarray:
     path, key = s.depth_path, "depth_file_path"
     assert path is not None
@@ -71,7 +78,8 @@ def read_depth(s: FrameSpec, scale: float) -> np.ndarray:
                          field=key)
     if suffix == ".npy":
         try:
-            raw = np.load(path, allow_pickle=False)
+            with _NPY_HEADER:
+                raw = np.load(path, allow_pickle=False)
         except (OSError, ValueError, EOFError) as exc:
             raise InputError(path, f"cannot be read as a .npy array ({exc})", frame=s.label,
                              field=key) from exc
