@@ -97,9 +97,10 @@ class OptimiseOptions:
     depth: bool = option(True, "refine each joint last on the interaction frames' depth, kept "
                          "unless the image loss says it is worse (--no-depth: the rendering "
                          "fit's joints)")
-    helper: bool = option(True, "fit the type choice's second hypothesis of each joint in a "
-                          "helper process, each with half of this one's threads, when it has two "
-                          "or more (--no-helper: all in this one; the result is the same)")
+    helper: bool = option(True, "share the work with a helper process (the type choice's "
+                          "second fit of each joint, half of each fit step's frames), each with "
+                          "half of this one's threads, when it has two or more (--no-helper: all "
+                          "in this one; the result is the same)")
     device: str = _device()
     max_side: int = _max_side()
     robot_twin: bool = _robot_twin()

@@ -310,15 +310,17 @@ def _assert_same(a: tuple, b: tuple) -> None:
 
 
 class _KillHelper(Progress):
-    """Quiet progress that kills this process's children (the helper) once the type choice's
-    fit here has begun, while the helper fits its own."""
+    """Quiet progress that kills this process's children (the helper) once a fit whose phase
+    holds ``phase`` has begun: the type choice's ("restarted", while the helper fits its own)
+    or a later one (whose steps' second halves the helper renders)."""
 
-    def __init__(self) -> None:
+    def __init__(self, phase: str) -> None:
         super().__init__("quiet")
+        self.phase = phase
         self.killed = 0
 
     def update(self, stage, fraction, message="", force=False, **figures):
-        if not self.killed and "restarted" in message:
+        if not self.killed and self.phase in message:
             for child in multiprocessing.active_children():
                 child.kill()
                 self.killed += 1
@@ -326,30 +328,32 @@ class _KillHelper(Progress):
 
 
 def test_a_helper_process_gives_the_same_result(cabinet, tmp_path):
-    """The type choice's second fit in a helper process (``helper``, two threads here) ends
-    where one process does: same parts and types, joints within the runs' 1e-3 degrees and
-    1e-5 m (fails when the helper's fit draws other random times than it would here, or
-    starts from another state); and so does a run whose helper is killed mid-fit (its fit is
-    then made here)."""
+    """A helper process (``helper``, two threads here: the type choice's second fit, the
+    second half of other fits' frames and of evaluations) ends where one process does: same
+    parts and types, joints within the runs' 1e-3 degrees and 1e-5 m (fails when the helper's
+    fit draws other random times than it would here, starts from another state, or a step's
+    gradients are summed otherwise); and so do runs whose helper is killed mid-fit (its work
+    is then done here), in the type choice or in a later fit."""
     gt = read_articulation(cabinet / "gt.json")
     start = [_perturb(j, 10.0, 0.05, seed=3) for j in gt.joints]
     start[0].type = "prismatic" if start[0].type == "revolute" else "revolute"
     runs: list[tuple] = []
     threads = torch.get_num_threads()
     torch.set_num_threads(2)
-    killer = _KillHelper()
+    killers = [_KillHelper("restarted"), _KillHelper("skinning")]
     try:
         for helper in (False, True):
             runs.append(_optimised(tmp_path / str(helper), cabinet, start,
                                    OptimiseOptions(iterations=40, helper=helper)))
             assert runs[-1][2]["processes"] == 1 + helper
-        killed = _optimised(tmp_path / "killed", cabinet, start,
-                            OptimiseOptions(iterations=40), killer)
+        killed = [_optimised(tmp_path / k.phase, cabinet, start, OptimiseOptions(iterations=40),
+                             k) for k in killers]
     finally:
         torch.set_num_threads(threads)
     _assert_same(*runs)
-    assert killer.killed == 1
-    _assert_same(runs[0], killed)
+    for killer, run in zip(killers, killed):
+        assert killer.killed == 1
+        _assert_same(runs[0], run)
 
 
 def test_a_helper_does_not_run_an_unguarded_script_again(tmp_path):
@@ -357,14 +361,14 @@ def test_a_helper_does_not_run_an_unguarded_script_again(tmp_path):
     optimisation does runs once (spawn would run it again in the helper, which then fails)."""
     script = tmp_path / "unguarded.py"
     script.write_text(
-        "import multiprocessing, os\n"
+        "import os, pickle\n"
         "print('MAIN RUN', flush=True)\n"
         "from artgs.core.stages.optimise import parallel\n"
-        "with parallel.main_hidden():\n"
-        "    pool = multiprocessing.get_context('spawn').Pool(1, initializer=parallel._start,\n"
-        "                                                     initargs=(1,))\n"
-        "print('HELPER', pool.apply_async(os.getpid).get(120) != os.getpid(), flush=True)\n"
-        "pool.terminate()\n")
+        "proc, conn = parallel.spawn(1)\n"
+        "conn.send_bytes(pickle.dumps((os.getpid, ())))\n"
+        "ok, pid = pickle.loads(conn.recv_bytes())\n"
+        "print('HELPER', ok and pid != os.getpid(), flush=True)\n"
+        "proc.terminate()\n")
     r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
                        timeout=300, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
@@ -926,7 +930,7 @@ def test_key_time_is_never_the_closed_state(cabinet):
     from artgs.core.stages.optimise.frames import interaction_frames
     from artgs.core.stages.optimise.hypotheses import key_time
     from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
-    from artgs.core.stages.optimise.stage import object_size
+    from artgs.core.stages.optimise.stage import Runner, object_size
 
     capture = load_capture(cabinet)
     gt = read_articulation(cabinet / "gt.json").joints
@@ -941,8 +945,9 @@ def test_key_time_is_never_the_closed_state(cabinet):
     model = ArticulatedSplat(Splat.from_arrays(arrays, torch.device("cpu")), gt, frames.times,
                              assign_parts(arrays.means, gt), object_size(arrays.means),
                              [False] * len(gt))
+    run = Runner(model, frames, FitConfig(), QUIET, OptimiseOptions(), torch.zeros(len(gt)))
     for k, true in enumerate(gt):
-        key = key_time(model, frames, FitConfig(), k)
+        key = key_time(run, k)
         assert frames.times[key] != 0
         assert abs(true.states[frames.times[key]]) > 0.5 * max(map(abs, true.states.values()))
 

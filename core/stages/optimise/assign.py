@@ -31,7 +31,6 @@ import torch.nn.functional as F
 
 from ...render.sh import sh0_to_rgb
 from .changes import colour_of, region_of
-from .fit import evaluate
 from .model import ArticulatedSplat, restore, snapshot
 from .seen import project
 
@@ -102,11 +101,11 @@ def reassign(run, steps: int, share: float, locked: list[bool]) -> dict[str, lis
     if (after == before).all():
         run.done += share
         return {}
-    loss0 = float(evaluate(model, frames, cfg).mean())
+    loss0 = float(run.evaluate().mean())
     snap, hard, logits = snapshot(model), model.hard.clone(), model.logits.clone()
     model.reassign_all(after)
     run.run_fit(steps, "parts by depth", share, lr_scale=0.1)
-    loss1 = float(evaluate(model, frames, cfg).mean())
+    loss1 = float(run.evaluate().mean())
     moved = {name: [int(((after == k + 1) & (before != k + 1)).sum()),
                     int(((before == k + 1) & (after != k + 1)).sum())]
              for k, name in enumerate(model.names)}

@@ -31,7 +31,6 @@ from ..propose.motion.cameras import make_views, step_cloud
 from ..propose.motion.config import MotionConfig
 from ..propose.motion.track import visible_filter
 from ..propose.stage import splat_depth, twin_depth
-from .fit import evaluate
 from .hypotheses import REMOVE_TOL, moving_frames, part_points
 from .kinematics import REVOLUTE
 from .model import restore, snapshot
@@ -82,7 +81,7 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
                     ) -> dict[str, dict[str, float]]:
     """Refine every unlocked joint on the depth (module doc); returns per joint the image loss
     over its moving frames before and after and whether the refinement was kept."""
-    model, frames, cfg, options = run.model, run.frames, run.cfg, run.options
+    model, frames, options = run.model, run.frames, run.options
     mc = config or MotionConfig()
     views = make_views(capture, lambda camera: splat_depth(arrays, camera, options.device), mc,
                        twin_depth(capture, options.robot_twin, options.device))
@@ -114,13 +113,13 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
             new = in_panel(new, pts, model.size, mc.front_snap_deg)
         elif (front := front_face(pts, new.axis, model.size)) is not None:
             new, _ = snap_to_front(new, front, mc.front_snap_deg)   # as the motion route
-        here = float(evaluate(model, frames, cfg, 0, ids).mean())
+        here = float(run.evaluate(0, ids).mean())
         kept = snapshot(model)
         sign = 1.0 if new.axis @ axis >= 0 else -1.0    # refine_joint may flip axis and values
         refined = {t: sign * v for t, v in values.items()}
         refined.update(zip(moving, map(float, new.values)))
         model.set_type(k, model.types[k], new.axis, new.origin, refined)
-        there = float(evaluate(model, frames, cfg, 0, ids).mean())
+        there = float(run.evaluate(0, ids).mean())
         turn = float(np.degrees(np.arccos(np.clip(abs(new.axis @ axis), -1, 1))))
         shift = float(np.linalg.norm(np.cross(new.origin - origin, axis))) \
             if model.types[k] == REVOLUTE else 0.0

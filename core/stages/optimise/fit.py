@@ -4,6 +4,9 @@ Each step renders every fixed camera at one random interaction time and descends
 ``image_loss`` (robust depth) + regularisers with Adam; the first ``coarse`` fraction of the steps
 renders at the pyramid's coarsest level, which widens the basin (a wrong start still overlaps its
 target at low resolution), the rest at full resolution. Only the joints in ``free`` move.
+
+A step's frames are two halves (:func:`halves`) whose gradients are summed: the second half
+can be rendered in another process (``other``, :mod:`.parallel`) with the same result.
 """
 
 from __future__ import annotations
@@ -18,6 +21,11 @@ from ...train.adam import Adam
 from ...train.losses import robust_image_loss
 from .frames import FrameSet
 from .model import ArticulatedSplat
+
+#: ``other(params, level, widen, ids, n)``: starts :func:`half_grads` of a step's second half
+#: of frames for the optimiser's ``params``; the function it returns waits for its result.
+Other = Callable[[dict[str, torch.Tensor], int, float, list[int], int],
+                 Callable[[], tuple[float, dict[str, torch.Tensor]]]]
 
 
 @dataclass
@@ -62,6 +70,38 @@ def frame_loss(model: ArticulatedSplat, frames: FrameSet, level: int, i: int,
                              noise_sigmas=cfg.noise_sigmas * widen, exposure=cfg.exposure)
 
 
+def frames_loss(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, level: int,
+                ids: list[int], n: int, widen: float = 1.0) -> torch.Tensor:
+    """Sum of :func:`frame_loss` over frames ``ids``, divided by ``n``."""
+    return sum(frame_loss(model, frames, level, i, cfg, widen) for i in ids) / max(n, 1)
+
+
+def halves(ids: list[int]) -> tuple[list[int], list[int]]:
+    """A step's frames as the half rendered with the regularisers and the half that can be
+    rendered elsewhere (empty for a single frame)."""
+    cut = len(ids) // 2 if len(ids) > 1 else len(ids)
+    return ids[:cut], ids[cut:]
+
+
+def half_grads(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig,
+               params: dict[str, torch.Tensor], level: int, widen: float, ids: list[int],
+               n: int) -> tuple[float, dict[str, torch.Tensor]]:
+    """:func:`frames_loss` of frames ``ids`` with the model at ``params`` (leaves requiring
+    gradients) and its gradient for each of them that it reaches."""
+    model.load(params)
+    loss = frames_loss(model, frames, cfg, level, ids, n, widen)
+    names = list(params)
+    grads = torch.autograd.grad(loss, [params[k] for k in names], allow_unused=True)
+    return float(loss.detach()), {k: g for k, g in zip(names, grads) if g is not None}
+
+
+def here(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig) -> Other:
+    """:data:`Other` in this process (after this process's half: the same sums as elsewhere)."""
+    def start(params, level, widen, ids, n):
+        return lambda: half_grads(model, frames, cfg, params, level, widen, ids, n)
+    return start
+
+
 @torch.no_grad()
 def evaluate(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, level: int = 0,
              subset: list[int] | None = None) -> np.ndarray:
@@ -74,7 +114,8 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         rng: np.random.Generator, *, free: list[bool] | None = None,
         times: list[int] | None = None, prior: torch.Tensor | None = None,
         tick: Callable[[int, float], None] | None = None, coarse: float = 0.0,
-        lr_scale: float = 1.0, coarse_level: int | None = None) -> float:
+        lr_scale: float = 1.0, coarse_level: int | None = None, other: Other | None = None
+        ) -> float:
     """Run ``steps`` Adam steps; returns the mean loss of the last quarter of them.
 
     ``free``: joints that move (default all; the camera corrections, when learnt, move only
@@ -84,7 +125,8 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     every step (progress and cancel); ``coarse``: fraction of the steps at the coarsest level;
     ``lr_scale``: multiplies the learning rates (refining phases start below the first fit's
     rates: Adam's steps are about the learning rate whatever the gradient, so a converged
-    solution restarted at full rate would wander off).
+    solution restarted at full rate would wander off); ``other``: where each step's second half
+    of frames is rendered (default here).
     """
     if steps <= 0 or model.k == 0:
         return float("nan")
@@ -101,6 +143,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     pool = time_pool(frames, times)
     coarse_level = len(frames.levels) - 1 if coarse_level is None else coarse_level
     n_coarse = int(coarse * steps)
+    other = other or here(model, frames, cfg)
     losses: list[float] = []
     for step in range(steps):
         decay = cfg.lr_final ** (step / steps)
@@ -112,7 +155,9 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         widen = cfg.widen ** (1 - step / n_coarse) if in_coarse else 1.0
         ti = draw_time(rng, pool)
         ids = frames.at_time(ti)
-        loss = sum(frame_loss(model, frames, level, i, cfg, widen) for i in ids) / max(len(ids), 1)
+        mine, theirs = halves(ids)
+        pending = other(opt.params, level, widen, theirs, len(ids)) if theirs else None
+        loss = frames_loss(model, frames, cfg, level, mine, len(ids), widen)
         smooth, entropy = model.skin_regularisers()
         loss = loss + cfg.lambda_smooth * smooth + cfg.lambda_entropy * entropy \
             + cfg.lambda_temporal * model.temporal()
@@ -124,6 +169,13 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
             loss = loss + cfg.lambda_camera * model.camera_prior(np.radians(1.0), 0.01)
         opt.zero_grad()
         loss.backward()
+        value = float(loss.detach())
+        if pending is not None:
+            their_loss, grads = pending()
+            value += their_loss
+            for name, g in grads.items():
+                p = opt.params[name]
+                p.grad = g.clone() if p.grad is None else p.grad.add_(g)
         if free is not None and "cameras" in opt.params:   # one joint's hypothesis: cameras stay
             opt.params["cameras"].grad = None
         for name in ("axes", "origins", "states", "gains"):
@@ -134,7 +186,7 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
                 g.mul_(mask.view(-1, *([1] * (g.ndim - 1))))
         opt.step()
         model.load(opt.params)
-        losses.append(float(loss.detach()))
+        losses.append(value)
         if tick is not None:
             tick(step, losses[-1])
     model.load({k: v.detach() for k, v in opt.params.items()})

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from ...geometry.rigid import JointFit, fit_both, kabsch
-from .fit import evaluate, part_level, score_level, search_states, skip_draws
+from .fit import part_level, score_level, search_states, skip_draws
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot, unshaded
 from .plausible import HIDDEN_SHARE, into_body
@@ -317,19 +317,17 @@ def moving_frames(model: ArticulatedSplat, frames, k: int) -> list[int]:
     return [i for i, ti in enumerate(frames.time_index) if v[ti] > 0.1 * v.max()]
 
 @torch.no_grad()
-def key_time(model: ArticulatedSplat, frames, cfg, k: int) -> int:
+def key_time(run, k: int) -> int:
     """The time index where joint ``k`` at rest (others as fitted) explains the frames worst:
     where its part is furthest from closed, whatever the current hypothesis says. Never time
     0, where every joint is at rest: were it the worst explained (a realistic washing
     machine's), every hypothesis would score alike there and the first would win."""
-    from .fit import frame_loss
-    level = score_level(frames)
+    model, frames = run.model, run.frames
     snap = snapshot(model)
     model.states = model.states.clone()
     model.states[k] = 0.0
     per_time = np.zeros(len(frames.times))
-    for i, ti in enumerate(frames.time_index):
-        per_time[ti] += float(frame_loss(model, frames, level, i, cfg))
+    np.add.at(per_time, np.asarray(frames.time_index), run.evaluate(score_level(frames)))
     restore(model, snap)
     per_time[model.moving.cpu().numpy() == 0] = -np.inf
     return int(np.argmax(per_time))
@@ -382,8 +380,8 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
             run.done += share / len(todo)
             continue
         kept = snapshot(model)
-        here = evaluate(model, frames, cfg, 0, ids)
-        key = key_time(model, frames, cfg, k)
+        here = run.evaluate(0, ids)
+        key = key_time(run, k)
         flat = [h for options in hyps.values() for h in options]
         scored: dict[str, list[tuple]] = {}
         for (kind, axis, point, _), loss in zip(flat, score_all(run, k, key, flat)):
@@ -463,7 +461,7 @@ def fit_type(run, k: int, kind: str, own: str, scored: list[tuple], ids: list[in
     restore(model, start)
     run.run_fit(steps, label, share, free=[i == k for i in range(model.k)], coarse=cfg.coarse,
                 coarse_level=part_level(model, frames, k))
-    fitted = (evaluate(model, frames, cfg, 0, ids), snapshot(model), kind, kind == own,
+    fitted = (run.evaluate(0, ids), snapshot(model), kind, kind == own,
               hidden_share(run, k) > HIDDEN_SHARE)
     restore(model, kept)
     return fitted
@@ -479,7 +477,7 @@ def refit(run, k: int, start: tuple, kind: str, restarted: bool, ids: list[int],
     run.run_fit(steps, f"{model.names[k]} turned outwards", 0.0,
                 free=[i == k for i in range(model.k)], coarse=cfg.coarse,
                 coarse_level=part_level(model, frames, k))
-    fitted = (evaluate(model, frames, cfg, 0, ids), snapshot(model), kind, restarted,
+    fitted = (run.evaluate(0, ids), snapshot(model), kind, restarted,
               hidden_share(run, k) > HIDDEN_SHARE)
     restore(model, kept)
     return fitted
@@ -539,7 +537,7 @@ def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: st
         if len(top) > 1:
             run.run_fit(steps, f"{label} (probe)", share / len(top),
                         free=[i == k for i in range(model.k)], coarse=1.0, coarse_level=level)
-        loss = float(evaluate(model, frames, cfg, score_level(frames), ids).mean())
+        loss = float(run.evaluate(score_level(frames), ids).mean())
         key = (hidden_share(run, k) > HIDDEN_SHARE, loss)
         if best is None or key < best[0]:
             best = (key, snapshot(model))
@@ -604,7 +602,7 @@ def remove_spurious(run, locked: list[bool]) -> list[str]:
     merged into the base) and better than the part gone (its Gaussians transparent: a motion
     that only takes wrong Gaussians out of the way, such as a PartNet drawer unit's slides of
     40 cm for a drawer opened 10, is no evidence of a joint); returns their names."""
-    model, frames, cfg = run.model, run.frames, run.cfg
+    model, frames = run.model, run.frames
     removed = []
     k = 0
     while k < model.k:
@@ -613,15 +611,15 @@ def remove_spurious(run, locked: list[bool]) -> list[str]:
             continue
         ids = moving_frames(model, frames, k)
         with unshaded(model):
-            here = evaluate(model, frames, cfg)
+            here = run.evaluate()
             snap = snapshot(model)
             with torch.no_grad():
                 model.states = model.states.clone()
                 model.states[k] = 0.0
-            rest = evaluate(model, frames, cfg)
+            rest = run.evaluate()
             restore(model, snap)
             with vanished(model, k):
-                gone = evaluate(model, frames, cfg)
+                gone = run.evaluate()
         worse = [(what, loss) for what, loss in (("at rest", rest), ("gone", gone))
                  if not clearly_better(loss, here, ids)]
         if worse:
@@ -690,7 +688,7 @@ def one_explains_both(run, fixed: list[bool]) -> list[tuple[int, int]]:
     a piece's own fit is wrong: the fits of a realistic washing machine's round door,
     proposed as two halves, ended 10 and 50 deg off, the worse moving its half 17 cm (rms) from
     where the true hinge does; :func:`same_joint` could not see them as one."""
-    model, frames, cfg = run.model, run.frames, run.cfg
+    model, frames = run.model, run.frames
     moving = [set(moving_frames(model, frames, k)) for k in range(model.k)]
     logits, hard = model.logits, model.hard
     found = []
@@ -699,7 +697,7 @@ def one_explains_both(run, fixed: list[bool]) -> list[tuple[int, int]]:
     rest_of: dict[int, dict[int, float]] = {}   # per frame, part j at rest (the same for every i)
 
     def losses(todo: list[int]) -> np.ndarray:
-        return evaluate(model, frames, cfg, 0, todo)
+        return run.evaluate(0, todo)
 
     for i in range(model.k):
         for j in range(model.k):
@@ -711,7 +709,7 @@ def one_explains_both(run, fixed: list[bool]) -> list[tuple[int, int]]:
             model.reassign(part, 0)
             rest = memo_losses(rest_of.setdefault(j, {}), ids, losses)
             model.reassign(part, i + 1)
-            one = evaluate(model, frames, cfg, 0, ids)
+            one = run.evaluate(0, ids)
             model.logits, model.hard = logits, hard
             every = list(range(len(ids)))
             if clearly_better(here, one, every) and clearly_better(rest, one, every):
@@ -747,13 +745,13 @@ def joint_for_both(model: ArticulatedSplat, i: int, j: int) -> list[JointFit]:
 def start_best(run, k: int, fits: list[JointFit], ids: list[int]) -> str:
     """Joint ``k`` as it is or as one of ``fits``, whichever explains the frames ``ids`` best
     (image loss); returns which (``"kept"`` or the fit's type)."""
-    model, frames, cfg = run.model, run.frames, run.cfg
-    best, chosen = float(evaluate(model, frames, cfg, 0, ids).mean()), "kept"
+    model = run.model
+    best, chosen = float(run.evaluate(0, ids).mean()), "kept"
     keep = snapshot(model)
     for f in fits:
         restore(model, keep)
         model.set_type(k, f.type, f.axis, f.origin, f.values)
-        loss = float(evaluate(model, frames, cfg, 0, ids).mean())
+        loss = float(run.evaluate(0, ids).mean())
         if loss < best:
             best, chosen, better = loss, f.type, snapshot(model)
     restore(model, keep if chosen == "kept" else better)
@@ -774,7 +772,7 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
     clearly better than the two apart and than the other piece at rest
     (:func:`one_explains_both`) takes both. ``fixed`` joints (trusted user joints, locked ones)
     are left alone. Returns ``[kept, merged]`` name pairs. The model must be hardened."""
-    model, frames, cfg = run.model, run.frames, run.cfg
+    model, frames = run.model, run.frames
     merged: list[list[str]] = []
     fixed = list(fixed)
     steps = max(run.options.iterations // 4, 1)
@@ -789,7 +787,7 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
         if not pairs:
             return merged
         i, j = pairs[0]
-        here = float(evaluate(model, frames, cfg).mean())
+        here = float(run.evaluate().mean())
         fits = joint_for_both(model, i, j)
         ids = sorted(set(moving_frames(model, frames, i)) | set(moving_frames(model, frames, j)))
         model.reassign(model.labels() == j + 1, i + 1)
@@ -801,7 +799,7 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
         start = start_best(run, i, fits, ids)
         run.run_fit(steps, f"{names[1]} with {names[0]}", 0.0,
                     free=[k == i for k in range(model.k)], lr_scale=0.3)
-        joined = float(evaluate(model, frames, cfg).mean())
+        joined = float(run.evaluate().mean())
         why = "moves as {} does" if alike else "{}'s joint explains its part better"
         start = "" if start == "kept" else f", refitted from one {start} joint for both"
         run.progress.log(f"{names[1]}: {why.format(names[0])}; its part joins {names[0]}'s"
@@ -817,7 +815,7 @@ def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
     not traded for a fit that wandered along a flat valley: the image loss of a joint 0.5° off
     differs by 1e-5–1e-3 relative on 160x120 frames).
     Returns the names of the joints that kept their start."""
-    model, frames, cfg = run.model, run.frames, run.cfg
+    model, frames = run.model, run.frames
     kept = []
     for k in range(model.k):
         s = names.index(model.names[k]) if model.names[k] in names else None
@@ -827,7 +825,7 @@ def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
         if not ids:
             continue
         fitted = snapshot(model)
-        here = float(evaluate(model, frames, cfg, 0, ids).mean())
+        here = float(run.evaluate(0, ids).mean())
         with torch.no_grad():
             model.axes = model.axes.clone()
             model.origins = model.origins.clone()
@@ -836,7 +834,7 @@ def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
                 a = -a
             model.axes[k] = a
             model.origins[k] = torch.as_tensor(start_origins[s], dtype=torch.float32)
-        there = float(evaluate(model, frames, cfg, 0, ids).mean())
+        there = float(run.evaluate(0, ids).mean())
         if there < here * (1 + REMOVE_TOL):   # the frames cannot tell them apart: the start
             kept.append(model.names[k])
             run.progress.log(f"{model.names[k]}: the start explains the frames better "

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .fit import evaluate, part_level, search_states
+from .fit import part_level, search_states
 from .hypotheses import (REMOVE_TOL, clearly_better, hidden_share, hinge_lines, key_time,
                          part_normal, part_points, score_at, state_candidates)
 from .kinematics import PRISMATIC, REVOLUTE
@@ -83,7 +83,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         members = np.zeros(model.splat.n, bool)
         members[flagged[g]] = True
         with unshaded(model):
-            before_frames = evaluate(model, frames, cfg)
+            before_frames = run.evaluate()
         before = float(before_frames.mean())
         kept = snapshot(model)
         name = f"part_{len(model.names) + 1}"
@@ -95,7 +95,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         hyps = [(REVOLUTE, a, p) for a, p in hinge_lines(model, pts)]
         hyps += [(PRISMATIC, d, pts.mean(0)) for d in
                  [part_normal(model, k)] + list(np.linalg.svd(pts - pts.mean(0))[2])]
-        key = key_time(model, frames, cfg, k)
+        key = key_time(run, k)
         scored = []
         for kind, axis, point in hyps:
             model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
@@ -115,7 +115,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
                         free=[i == k for i in range(model.k)], coarse=cfg.coarse,
                         coarse_level=part_level(model, frames, k))
             with unshaded(model):
-                after_frames = evaluate(model, frames, cfg)
+                after_frames = run.evaluate()
             after = float(after_frames.mean())
             # a part the optimisation invents has only the loss it lowers as evidence: over
             # all frames, not on the frames it picks itself (the local test is for proposals)
@@ -135,7 +135,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             restore(model, kept)
             tried |= members
             continue
-        into = merge_target(model, frames, cfg, k, after)
+        into = merge_target(run, k, after)
         if into is None:
             added.append(name)
             continue
@@ -173,10 +173,11 @@ def hinge_off_part(model: ArticulatedSplat, k: int) -> bool:
     return off_part(axes[k], origins[k], part_points(model, k, limit=model.splat.n))
 
 @torch.no_grad()
-def merge_target(model: ArticulatedSplat, frames, cfg, k: int, loss: float) -> int | None:
+def merge_target(run, k: int, loss: float) -> int | None:
     """The joint of the same type whose motion explains joint ``k``'s part as well as ``k`` does
     (within ``REMOVE_TOL`` of ``loss``, the image loss over all frames): a new part that is the
     rest of an existing one (Gaussians its box missed) is merged into it. None if none."""
+    model = run.model
     best = None
     hard = model.hard.clone()
     members = torch.as_tensor(model.labels() == k + 1, device=hard.device)
@@ -189,7 +190,7 @@ def merge_target(model: ArticulatedSplat, frames, cfg, k: int, loss: float) -> i
         states = model.states.clone()
         model.states = states.clone()
         model.states[k] = 0.0
-        merged = float(evaluate(model, frames, cfg).mean())
+        merged = float(run.evaluate().mean())
         model.states, model.hard = states, hard
         if merged <= loss * (1 + REMOVE_TOL) and (best is None or merged < best[0]):
             best = (merged, j)

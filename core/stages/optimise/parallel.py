@@ -1,18 +1,23 @@
-"""A second process for the type choice's two independent fits (:func:`.hypotheses.select_types`).
+"""A second process for the optimisation: the type choice's two independent fits
+(:func:`.hypotheses.select_types`), the second half of every other fit step's frames, and half
+of the frames of long evaluations.
 
 The optimisation's work is one thread's Python and torch dispatch on small images: a second
 thread in the kernels buys 13-19 % (README, *Threads*), while two one-thread processes do two
-fits at once. The type choice fits each joint as the other type and restarted as its own type
-(probes and a full fit each, about half of a run), each from the same model state, so one of the
-two runs in a helper process (``multiprocessing.Pool``, spawned: numba's OpenMP threads do not
-survive a fork) and the other here, each with half the threads.
+things at once. The type choice fits each joint as the other type and restarted as its own
+type (probes and a full fit each, about half of a run), each from the same model state, so one
+of the two runs in a helper process (spawned: numba's OpenMP threads do not survive a fork;
+:func:`spawn`) and the other here, each with half the threads. Every other fit renders a
+step's second half of frames (one of two cameras) there while this process renders the first
+(:class:`Halves`, :func:`.fit.halves`); the gradients are summed here. :func:`evaluate` splits
+its frames the same way.
 
 Same result as one process: the helper gets the model's state and the random generator's, this
-process skips the draws the helper's fit makes (:func:`.fit.skip_draws`), and a render's
+process skips the draws the helper's fit makes (:func:`.fit.skip_draws`), one process renders
+a step's halves apart too and sums their gradients in the same order, and a render's
 gradients do not depend on the thread count (core/render/cpu/backend.py, ``grad_buffers``).
 Used only where this process has two or more threads (``artgs batch --workers 2`` gives each
-capture one); a helper that fails to start leaves everything to this process.
-"""
+capture one); a helper that fails to start leaves everything to this process"""
 
 from __future__ import annotations
 
@@ -20,31 +25,62 @@ import multiprocessing
 import pickle
 import signal
 import sys
+import threading
 from contextlib import contextmanager
+from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
 from typing import Any, Callable, Iterator
 
 import numba
+import numpy as np
 import torch
 
 from ...model.progress import Progress
+from .fit import evaluate as evaluate_here, half_grads, here
 
-_RUN: Any = None      # the helper's copy of the Runner (set by _start)
+_RUN: Any = None      # the helper's copy of the Runner (set by _load)
 #: Seconds between cancel checks while this process waits for the helper.
 POLL = 0.2
 #: Seconds a helper may take to start (import torch, load the kernels, unpickle the splat).
 START_TIMEOUT = 120.0
 
 
-def _start(threads: int) -> None:
-    """Helper process initializer: its threads and deterministic kernels."""
+def _serve(conn: Connection, threads: int) -> None:
+    """The helper process: each request ``(fn, args)`` it receives is run as ``fn(*args)`` and
+    answered with ``(True, result)`` or ``(False, error)``, in order, until the pipe closes.
+    Plain pickles both ways (tensors by value, not in shared memory)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)      # the parent cancels and ends the helper
     torch.set_num_threads(threads)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     torch.use_deterministic_algorithms(True, warn_only=True)
+    while True:
+        try:
+            fn, args = pickle.loads(conn.recv_bytes())
+        except (EOFError, OSError):
+            return
+        try:
+            reply = (True, fn(*args))
+        except Exception as exc:   # noqa: BLE001 - reported to the parent, which goes on alone
+            reply = (False, f"{type(exc).__name__}: {exc}")
+        conn.send_bytes(pickle.dumps(reply))
+
+
+def spawn(threads: int) -> tuple[BaseProcess, Connection]:
+    """A helper process with ``threads`` threads serving requests (:func:`_serve`) on the
+    returned connection. A process and a pipe, not a ``multiprocessing.Pool``: a pool's worker
+    killed while it reads its task queue holds the queue's lock for ever, and the pool's
+    ``terminate`` then waits for it (seen: a helper killed mid-fit hung the run)."""
+    ctx = multiprocessing.get_context("spawn")
+    mine, theirs = ctx.Pipe()
+    proc = ctx.Process(target=_serve, args=(theirs, threads), daemon=True, name="artgs-helper")
+    with main_hidden():
+        proc.start()
+    theirs.close()
+    return proc, mine
 
 
 def _load(payload: bytes) -> bool:
-    """The helper's first task: the Runner rebuilt from the parent's."""
+    """The helper's first request: the Runner rebuilt from the parent's."""
     global _RUN
     from .stage import Runner
     model, frames, cfg, options, trust, space = pickle.loads(payload)
@@ -53,81 +89,228 @@ def _load(payload: bytes) -> bool:
     return True
 
 
-def _call(fn: Callable, blob: bytes) -> bytes:
+def _call(fn: Callable, state: dict, rng_state: dict, args: tuple) -> Any:
     """Helper side of :meth:`Helper.call`: ``fn(run, *args)`` from the parent's model and
-    generator state. Plain pickles both ways (tensors by value, not in shared memory)."""
-    state, rng_state, args = pickle.loads(blob)
+    generator state."""
     _RUN.model.set_state(state)
     _RUN.rng.bit_generator.state = rng_state
-    return pickle.dumps(fn(_RUN, *args))
+    return fn(_RUN, *args)
+
+
+def _begin(state: dict) -> None:
+    """Helper side of :class:`Halves`: the model's state at a fit's start."""
+    _RUN.model.set_state(state)
+
+
+def _half(params: dict, level: int, widen: float, ids: list[int], n: int) -> tuple:
+    """Helper side of :class:`Halves`: :func:`.fit.half_grads` at the parent's parameters."""
+    leaves = {k: v.requires_grad_(True) for k, v in params.items()}
+    return half_grads(_RUN.model, _RUN.frames, _RUN.cfg, leaves, level, widen, ids, n)
+
+
+def _evaluate(state: dict, level: int, ids: list[int]) -> np.ndarray:
+    """Helper side of :func:`evaluate`."""
+    _RUN.model.set_state(state)
+    return evaluate_here(_RUN.model, _RUN.frames, _RUN.cfg, level, ids)
 
 
 class Helper:
     """One spawned helper process holding a copy of the optimisation (:class:`.stage.Runner`)
-    as it was when started; each call brings it the current model state."""
+    as it was when started; each request brings it the current model state. Requests are
+    numbered and answered in order."""
 
     def __init__(self, run) -> None:
-        m = run.model
-        payload = pickle.dumps((m, run.frames, run.cfg, run.options, run.trust, run.space))
+        payload = pickle.dumps((run.model, run.frames, run.cfg, run.options, run.trust,
+                                run.space))
         self.threads = max(torch.get_num_threads() // 2, 1)
-        with main_hidden():
-            self.pool = multiprocessing.get_context("spawn").Pool(
-                1, initializer=_start, initargs=(self.threads,))
-        # queued: the pool's own thread sends it while this one goes on with the first fit
-        self.loaded = self.pool.apply_async(_load, (payload,))
-        self.worker = self._workers()
-        self.checked = False
+        self.proc, self.conn = spawn(self.threads)
+        self.sent = self.received = 0
+        self.replies: dict[int, tuple[bool, Any]] = {}
+        self.unwanted: set[int] = set()
+        self.sending: threading.Thread | None = None
+        # sent by a thread while this one goes on with the first fit (the helper reads it
+        # once it has imported torch)
+        self.loaded = self.submit(_load, (payload,), background=True)
+        self.up: bool | None = None     # whether it loaded the run; None: not known yet
+        self.busy = False      # in :meth:`call`: its fits here render all their frames here
 
-    def _workers(self) -> list[int]:
-        """The pool's worker pids: a worker that died (killed, out of memory) is replaced by
-        one without the run's copy, and its job never finishes."""
-        return [p.pid for p in self.pool._pool]   # noqa: SLF001 - Pool has no public accessor
+    def submit(self, fn: Callable, args: tuple, wanted: bool = True,
+               background: bool = False) -> int:
+        """Send the request ``fn(*args)``; returns its number (for :meth:`reply`)."""
+        if self.sending is not None:
+            self.sending.join()
+            self.sending = None
+        blob = pickle.dumps((fn, args))
+        if background:
+            self.sending = threading.Thread(target=self._send, args=(blob,), daemon=True)
+            self.sending.start()
+        else:
+            self._send(blob)
+        job = self.sent
+        self.sent += 1
+        if not wanted:
+            self.unwanted.add(job)
+        return job
 
-    def alive(self) -> bool:
-        """Whether the helper started at first is still the pool's worker."""
-        return self._workers() == self.worker and all(p.is_alive() for p in self.pool._pool)
+    def _send(self, blob: bytes) -> None:
+        try:
+            self.conn.send_bytes(blob)
+        except (OSError, ValueError):     # a dead helper: its reply never comes (:meth:`reply`)
+            pass
+
+    def _take(self, timeout: float) -> bool:
+        """Take one reply if one arrives within ``timeout`` s; False when none did. Raises
+        EOFError or OSError when the helper has gone."""
+        if not self.conn.poll(timeout):
+            return False
+        reply = pickle.loads(self.conn.recv_bytes())
+        if self.received in self.unwanted:
+            self.unwanted.discard(self.received)
+        else:
+            self.replies[self.received] = reply
+        self.received += 1
+        return True
+
+    def reply(self, job: int, check: Callable[[], None] | None = None,
+              timeout: float | None = None) -> tuple[bool, Any]:
+        """Wait for request ``job``'s reply: ``(True, result)``, or ``(False, why)`` when it
+        failed, the helper ended, or ``timeout`` s passed. ``check()`` (cancel) is called
+        while waiting."""
+        waited = 0.0
+        while job not in self.replies:
+            try:
+                if not self._take(POLL) and not self.proc.is_alive():
+                    return False, "the helper process ended"
+            except (EOFError, OSError):
+                return False, "the helper process ended"
+            waited += POLL
+            if timeout is not None and waited >= timeout and job not in self.replies:
+                return False, f"the helper process did not answer within {timeout:.0f} s"
+            if check is not None:
+                check()
+        return self.replies.pop(job)
+
+    def started(self) -> bool:
+        """Whether the helper has its copy of the run now (no waiting) and is alive."""
+        if self.up is None:
+            try:
+                while self._take(0.0):
+                    pass
+            except (EOFError, OSError):
+                self.up = False
+            if self.loaded in self.replies:
+                ok, value = self.replies.pop(self.loaded)
+                self.up = ok and bool(value)
+        return bool(self.up) and self.proc.is_alive()
 
     def ready(self) -> bool:
         """Wait until the helper has its copy of the run; False when it does not within the
-        timeout or dies (a helper whose start fails is started again and again by the pool)."""
-        if not self.checked:
-            waited = 0.0
-            while not self.loaded.ready() and self.alive() and waited < START_TIMEOUT:
-                self.loaded.wait(POLL)
-                waited += POLL
-            self.checked = (self.loaded.ready() and self.loaded.successful()
-                            and bool(self.loaded.get()))
-        return self.checked
+        timeout or fails."""
+        if self.up is None:
+            ok, value = self.reply(self.loaded, timeout=START_TIMEOUT)
+            self.up = ok and bool(value)
+        return self.up
 
     def call(self, run, fn: Callable, args: tuple, here: Callable[[], Any]) -> tuple[Any, Any]:
         """``fn(run, *args)`` in the helper from the current model and generator state while
         ``here()`` runs in this process with the other threads; both results. Cancels
-        (Ctrl-C, the add-on) are checked while waiting. Should the helper die, its call is
-        made here afterwards, from the same state (the same result, later), and the helper is
-        not used again."""
+        (Ctrl-C, the add-on) are checked while waiting. Should the helper fail or die, its
+        call is made here afterwards, from the same state (the same result, later), and the
+        helper is not used again."""
         run.processes = 2
         start = run.rng.bit_generator.state
-        blob = pickle.dumps((run.model.state(), start, args))
-        job = self.pool.apply_async(_call, (fn, blob))
-        with threads(torch.get_num_threads() - self.threads):
-            mine = here()
-            while not job.ready() and self.alive():
-                run.progress.check_cancel()
-                job.wait(POLL)
-        if job.ready() and job.successful():
-            return pickle.loads(job.get()), mine
-        run.progress.log("optimise: the helper process ended; this one goes on alone",
-                         level="warning")
+        job = self.submit(_call, (fn, run.model.state(), start, args))
+        self.busy = True
+        try:
+            with threads(torch.get_num_threads() - self.threads):
+                mine = here()
+                ok, theirs = self.reply(job, run.progress.check_cancel)
+        finally:
+            self.busy = False
+        if ok:
+            return theirs, mine
+        ended(run, theirs)
         end = run.rng.bit_generator.state
         run.rng.bit_generator.state = start
         theirs = fn(run, *args)
         run.rng.bit_generator.state = end
-        stop(run)
         return theirs, mine
 
     def close(self) -> None:
-        self.pool.terminate()
-        self.pool.join()
+        """End the helper process (first: a request being sent then fails, and its thread
+        ends)."""
+        self.proc.terminate()
+        self.proc.join(5)
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+        if self.sending is not None:
+            self.sending.join()
+        self.conn.close()
+
+
+class Halves:
+    """:data:`.fit.Other` through the helper: a fit step's second half of frames rendered
+    there while this process renders the first, each with half the threads. Until the helper
+    has started (the first fit overlaps its start), and should it die, the halves are
+    rendered here with all the threads (the same result). Made per fit (:func:`other`); the
+    caller restores the thread count after the fit."""
+
+    def __init__(self, run, helper: Helper) -> None:
+        self.run, self.helper = run, helper
+        self.local = here(run.model, run.frames, run.cfg)
+        self.all = torch.get_num_threads()
+        self.begun = False
+
+    def __call__(self, params, level, widen, ids, n):
+        h = self.helper
+        if self.run.helper is not h or not h.started():
+            set_threads(self.all)
+            return self.local(params, level, widen, ids, n)
+        if not self.begun:     # the fit's model (parts, types, flags) once, then its parameters
+            state = {k: v.detach() if torch.is_tensor(v) else v
+                     for k, v in self.run.model.state().items()}
+            h.submit(_begin, (state,), wanted=False)
+            self.begun = True
+            self.run.processes = 2
+        job = h.submit(_half, ({k: v.detach() for k, v in params.items()}, level, widen, ids, n))
+        set_threads(self.all - h.threads)
+
+        def wait():
+            ok, value = h.reply(job, self.run.progress.check_cancel)
+            if ok:
+                return value
+            ended(self.run, value)
+            set_threads(self.all)
+            return self.local(params, level, widen, ids, n)()
+        return wait
+
+
+def evaluate(run, level: int = 0, subset: list[int] | None = None) -> np.ndarray:
+    """:func:`.fit.evaluate` of ``run``'s model on its frames (or ``subset``) at ``level``: the
+    second half of the frames in the helper when it is there and free, the first here at once
+    (each frame's loss is its own: the same values as here alone)."""
+    ids = list(range(len(run.frames.time_index))) if subset is None else list(subset)
+    h = run.helper
+    if h is None or h.busy or len(ids) < 2 or not h.started():
+        return evaluate_here(run.model, run.frames, run.cfg, level, ids)
+    cut = len(ids) // 2
+    job = h.submit(_evaluate, (run.model.state(), level, ids[cut:]))
+    run.processes = 2
+    with threads(torch.get_num_threads() - h.threads):
+        mine = evaluate_here(run.model, run.frames, run.cfg, level, ids[:cut])
+        ok, theirs = h.reply(job, run.progress.check_cancel)
+    if not ok:
+        ended(run, theirs)
+        theirs = evaluate_here(run.model, run.frames, run.cfg, level, ids[cut:])
+    return np.concatenate([mine, theirs])
+
+
+def other(run) -> Halves | None:
+    """Where the run's fit steps render their second halves: the helper when there is one
+    and it is not fitting a hypothesis of its own (:meth:`Helper.call`), else None (here)."""
+    h = run.helper
+    return Halves(run, h) if h is not None and not h.busy else None
 
 
 @contextmanager
@@ -150,12 +333,18 @@ def main_hidden() -> Iterator[None]:
             setattr(main, k, v)
 
 
+def set_threads(n: int) -> None:
+    """torch and numba with ``n`` threads (at least one)."""
+    if torch.get_num_threads() != max(n, 1):
+        torch.set_num_threads(max(n, 1))
+    numba.set_num_threads(max(min(n, numba.config.NUMBA_NUM_THREADS), 1))
+
+
 @contextmanager
 def threads(n: int) -> Iterator[None]:
     """torch and numba with ``n`` threads (at least one) for the duration."""
     before = torch.get_num_threads(), numba.get_num_threads()
-    torch.set_num_threads(max(n, 1))
-    numba.set_num_threads(max(min(n, numba.config.NUMBA_NUM_THREADS), 1))
+    set_threads(n)
     try:
         yield
     finally:
@@ -186,6 +375,12 @@ def helper(run) -> Helper | None:
         stop(run)
         return None
     return h
+
+
+def ended(run, why: str) -> None:
+    """The helper failed or died (killed, out of memory): say so, and go on without it."""
+    run.progress.log(f"optimise: {why}; this process goes on alone", level="warning")
+    stop(run)
 
 
 def stop(run) -> None:

@@ -46,8 +46,9 @@ from ...model.ply import read_ply
 from ...model.progress import Progress
 from ...model.registry import OptimiseOptions
 from ...render.device import resolve_device
+from . import parallel
 from .depth_fit import refine_on_depth
-from .fit import FitConfig, evaluate, fit, search_states
+from .fit import FitConfig, fit, search_states
 from .frames import FrameSet, interaction_frames
 from ..robot_twin import tool_path
 from .occluders import known_occluders
@@ -99,9 +100,9 @@ class Runner:
         self.alternatives: dict[str, list] = {}
         #: where the static views measured the body (plausible.open_space), None without depth
         self.space: OpenSpace | None = None
-        #: the helper process of the type choice's fits (core/stages/optimise/parallel.py)
+        #: the helper process (core/stages/optimise/parallel.py)
         self.helper = None
-        self.processes = 1     # 2 once the helper fitted
+        self.processes = 1     # 2 once the helper worked
 
     def run_fit(self, steps: int, phase: str, share: float, **kw: Any) -> float:
         """A fit that reports progress for ``share`` of the stage."""
@@ -115,10 +116,16 @@ class Runner:
             else:
                 self.progress.check_cancel()
 
-        loss = fit(self.model, self.frames, self.cfg, steps, self.rng, prior=self.trust,
-                   tick=tick, **kw)
+        with parallel.threads(torch.get_num_threads()):   # as they were, after the halves
+            loss = fit(self.model, self.frames, self.cfg, steps, self.rng, prior=self.trust,
+                       tick=tick, other=parallel.other(self), **kw)
         self.done += share
         return loss
+
+    def evaluate(self, level: int = 0, subset: list[int] | None = None) -> np.ndarray:
+        """:func:`.fit.evaluate` of the model, its frames split with the helper process when
+        there is one (:func:`.parallel.evaluate`)."""
+        return parallel.evaluate(self, level, subset)
 
     def joint_figures(self) -> dict[str, Any]:
         """Current joints (streamed to the add-on so bones can move live)."""
@@ -156,7 +163,7 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
 def _optimise(out: Path | str, capture: Capture, progress: Progress,
               options: OptimiseOptions | None, config: FitConfig | None,
               closing: ExitStack) -> dict[str, Any]:
-    from . import assign, hypotheses, missed, parallel, seen
+    from . import assign, hypotheses, missed, seen
 
     options = options or OptimiseOptions()
     cfg = config or FitConfig()
@@ -245,7 +252,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         merged += hypotheses.merge_duplicates(run, fixed())
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
-    losses = evaluate(model, frames, cfg)
+    losses = run.evaluate()
     result = export(model, frames, joints, losses, evidence, cfg, space, depth)
     if not result:
         raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
