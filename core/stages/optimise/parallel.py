@@ -108,10 +108,10 @@ def _half(params: dict, level: int, widen: float, ids: list[int], n: int) -> tup
     return half_grads(_RUN.model, _RUN.frames, _RUN.cfg, leaves, level, widen, ids, n)
 
 
-def _evaluate(state: dict, level: int, ids: list[int]) -> np.ndarray:
-    """Helper side of :func:`evaluate`."""
-    _RUN.model.set_state(state)
-    return evaluate_here(_RUN.model, _RUN.frames, _RUN.cfg, level, ids)
+def losses_of(run, level: int, ids: list[int]) -> np.ndarray:
+    """:func:`.fit.evaluate` of ``run``'s model on frames ``ids`` at ``level`` (either side of
+    :func:`evaluate`)."""
+    return evaluate_here(run.model, run.frames, run.cfg, level, ids)
 
 
 class Helper:
@@ -293,16 +293,10 @@ def evaluate(run, level: int = 0, subset: list[int] | None = None) -> np.ndarray
     ids = list(range(len(run.frames.time_index))) if subset is None else list(subset)
     h = run.helper
     if h is None or h.busy or len(ids) < 2 or not h.started():
-        return evaluate_here(run.model, run.frames, run.cfg, level, ids)
+        return losses_of(run, level, ids)
     cut = len(ids) // 2
-    job = h.submit(_evaluate, (run.model.state(), level, ids[cut:]))
-    run.processes = 2
-    with threads(torch.get_num_threads() - h.threads):
-        mine = evaluate_here(run.model, run.frames, run.cfg, level, ids[:cut])
-        ok, theirs = h.reply(job, run.progress.check_cancel)
-    if not ok:
-        ended(run, theirs)
-        theirs = evaluate_here(run.model, run.frames, run.cfg, level, ids[cut:])
+    theirs, mine = h.call(run, losses_of, (level, ids[cut:]),
+                          lambda: losses_of(run, level, ids[:cut]))
     return np.concatenate([mine, theirs])
 
 
