@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 from artgs.core.geometry.parts import assign_parts
-from artgs.core.model.capture import load_capture
+from artgs.core.model.capture import Frame, load_capture
+from artgs.core.model.cameras import Camera, intrinsics, look_at
 from artgs.core.model.joints import Joint, read_articulation, rotation_about_axis
 from artgs.core.model.regime import regime
 from artgs.core.stages.optimise.hypotheses import PROBE_SPREAD_DEG, distinct, probed
-from artgs.core.stages.optimise.plausible import HIDDEN_SHARE, open_space
+from artgs.core.stages.optimise.plausible import HIDDEN_SHARE, into_body, open_space
 from artgs.core.stages.optimise.stage import handle_holds, object_size
 from artgs.core.stages.reconstruct import initial_splats
 from artgs.core.synth.generate import generate_object
@@ -43,7 +44,37 @@ def test_opening_goes_into_space_closing_into_the_body(capture):
         out = space.hidden_share(j.type, j.axis, j.origin, opening, pts)
         into = space.hidden_share(j.type, j.axis, j.origin, -opening, pts)
         assert out < HIDDEN_SHARE < into, (j.name, out, into)
+        assert into_body(space, j.type, j.axis, j.origin, np.array([0.0, -opening]), pts) == into
+        assert into_body(space, j.type, j.axis, j.origin, np.array([0.0, opening]), pts) == 0.0
         assert space.hidden_share(j.type, j.axis, j.origin, 0.0, pts) == 0.0
+
+
+def _floor_view(eye) -> Frame:
+    """A 64x48 view of the bare floor z = 0 from ``eye``, its exact depth."""
+    cam = Camera(intrinsics(60.0, 60.0, 32.0, 24.0), look_at(np.asarray(eye, float), np.zeros(3)),
+                 64, 48)
+    rays = cam.pixel_rays() @ np.linalg.inv(cam.w2c)[:3, :3].T      # world, per unit depth
+    depth = (-cam.center[2] / rays[..., 2]).astype(np.float32)
+    depth[~(depth > 0)] = 0.0
+    return Frame(0, "floor.png", cam, np.zeros((48, 64, 3), np.uint8), depth, None)
+
+
+def test_a_part_hidden_both_ways_is_not_judged_into_the_body():
+    """A board hinged 3 cm under a floor the static views saw (an oven door opening flat onto
+    the floor, its fit a little low) is hidden turned either way: the views cannot tell a body
+    from the floor, so neither way goes into the body. Pushed down through the floor it is
+    hidden where pulled up it is not: into the body."""
+    space = open_space([_floor_view([0.0, -1.5, 0.4]), _floor_view([1.0, 1.2, 0.5]),
+                        _floor_view([0.1, 0.2, 1.5])], size=0.5)
+    grid = np.stack(np.meshgrid(np.linspace(-0.2, 0.2, 9), [0.0],
+                                np.linspace(0.05, 0.4, 8)), -1).reshape(-1, 3)
+    x, hinge = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, -0.03])
+    for turn in (np.pi / 2, -np.pi / 2):
+        assert space.hidden_share("revolute", x, hinge, turn, grid) > HIDDEN_SHARE
+        assert into_body(space, "revolute", x, hinge, np.array([0.0, turn]), grid) == 0.0
+    z = np.array([0.0, 0.0, 1.0])
+    assert into_body(space, "prismatic", z, hinge, np.array([-0.5]), grid) > HIDDEN_SHARE
+    assert into_body(space, "prismatic", z, hinge, np.array([0.5]), grid) == 0.0
 
 
 def _joint(kind: str, point) -> Joint:

@@ -76,7 +76,8 @@ def part_points(model: ArticulatedSplat, k: int, limit: int = 400,
 
 def hidden_share(run, k: int) -> float:
     """Share of joint ``k``'s part that its current fit, at its widest state, moves behind
-    surfaces the static views measured (:func:`.plausible.into_body` in ``run.space``)."""
+    surfaces the static views measured, when reversed it would hide less; 0 otherwise
+    (:func:`.plausible.into_body` in ``run.space``)."""
     model = run.model
     axes, origins = model.joint_lines()
     return into_body(run.space, model.types[k], axes[k], origins[k],
