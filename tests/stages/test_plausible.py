@@ -44,7 +44,8 @@ def test_opening_goes_into_space_closing_into_the_body(capture):
         out = space.hidden_share(j.type, j.axis, j.origin, opening, pts)
         into = space.hidden_share(j.type, j.axis, j.origin, -opening, pts)
         assert out < HIDDEN_SHARE < into, (j.name, out, into)
-        assert into_body(space, j.type, j.axis, j.origin, np.array([0.0, -opening]), pts) == into
+        assert into_body(space, j.type, j.axis, j.origin, np.array([0.0, -opening]), pts) > \
+            HIDDEN_SHARE
         assert into_body(space, j.type, j.axis, j.origin, np.array([0.0, opening]), pts) == 0.0
         assert space.hidden_share(j.type, j.axis, j.origin, 0.0, pts) == 0.0
 
