@@ -122,10 +122,10 @@ def _run(capture_dir: Path, out: Path, progress: Progress, options: dict[str, An
             continue
         try:
             run_stage(spec, out, options[spec.name], progress, capture=capture)
-        except NothingFound:
+        except NothingFound as nothing:
             if spec.nothing_found is None:
                 raise
-            figures = resolve(spec.nothing_found)(out, options, progress)
+            figures = resolve(spec.nothing_found)(out, options, progress, nothing.reason)
             layout.update_report(out, spec.name, **figures)
 
     articulation = read_articulation(out / layout.ARTICULATION)

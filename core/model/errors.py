@@ -33,4 +33,9 @@ class Cancelled(ArtgsError):
 
 
 class NothingFound(ArtgsError):
-    """A stage ran but found nothing to write; earlier outputs are left as they were."""
+    """A stage ran but found nothing to write; earlier outputs are left as they were.
+    ``reason``: what the stage measured that explains it (for a stand-in to repeat)."""
+
+    def __init__(self, message: str, *, reason: str = "") -> None:
+        self.reason = reason
+        super().__init__(message)

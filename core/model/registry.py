@@ -152,7 +152,8 @@ class StageSpec:
     check: str | None = None
     needs_capture: bool = True
     #: In ``artgs run``, what stands in for the stage's outputs when it finds nothing
-    #: (``NothingFound``) and a later stage can still find it; None: the run stops there.
+    #: (``NothingFound``) and a later stage can still find it, called as ``(out, options,
+    #: progress, reason)`` (``reason``: the error's); None: the run stops there.
     nothing_found: str | None = None
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 import subprocess
 import sys
@@ -17,7 +18,7 @@ from artgs.core.model.capture import load_capture
 from artgs.core.model.joints import read_articulation
 from artgs.core.geometry.metrics import match_joints
 from artgs.core.model.ply import write_ply
-from artgs.core.model.progress import QUIET
+from artgs.core.model.progress import QUIET, Progress
 from artgs.core.model.registry import ProposeOptions
 from artgs.core.stages.propose.stage import propose
 from artgs.core.stages.propose.motion.route import propose_motion
@@ -226,3 +227,45 @@ def test_type_by_depth_when_tracking_drifts(data):
     alt = joints[k].extra["alternative"]
     assert alt["type"] == "prismatic" and abs(np.linalg.norm(alt["axis"]) - 1) < 1e-6
     assert set(alt["states"]) == {str(t) for t in joints[k].states}
+
+
+def test_nothing_seen_names_the_noise_thresholds(data):
+    """Depth noise far above the door's motion (sigma 0.1 m added to every interaction depth
+    map): the route sees no part, and its error names each camera's change threshold, which
+    follows the added noise (5 sigma of a difference = 707 mm), and the files are left alone."""
+    from artgs.core.model.errors import NothingFound
+    from artgs.core.stages.propose.stage import none_proposed
+    from artgs.core.stages.propose.motion.cameras import group_views
+    from artgs.core.model.registry import OptimiseOptions
+    cap = _capture(data, "microwave", 1)
+    noisy = data / "microwave_noisy"
+    shutil.copytree(cap, noisy)
+    tj = json.loads((noisy / "transforms.json").read_text())
+    rng = np.random.default_rng(0)
+    for f in tj["frames"]:
+        if f.get("phase") == "interaction":
+            path = noisy / f["depth_file_path"]
+            d = np.load(path)
+            np.save(path, np.where(d > 0, d + rng.normal(0, 0.1, d.shape), 0).astype(d.dtype))
+    out = data / "out_noisy"
+    out.mkdir()
+    capture = load_capture(noisy)
+    write_ply(out / "splat.ply", initial_splats(capture.static)[0])
+    with pytest.raises(NothingFound) as err:
+        propose(capture, out, QUIET, ProposeOptions(method="motion", device="cpu"))
+    assert not (out / "proposals.json").exists()
+    message = str(err.value)
+    assert "no joints" in message and "not seen by this route" in message, message
+    found = [float(x) for x in re.findall(r"(\d+) mm \(cam\d", err.value.reason)]
+    assert len(found) == len(group_views(capture.interaction)), message
+    assert all(abs(t - 5000 * math.sqrt(2) * 0.1) < 0.15 * 707 for t in found), found
+    logged = []
+
+    class Log(Progress):
+        def log(self, message: str, level: str = "info") -> None:
+            logged.append(message)
+
+    none_proposed(out, {"propose": ProposeOptions(), "optimise": OptimiseOptions()}, Log("quiet"),
+                  err.value.reason)
+    assert err.value.reason in logged[0]
+    assert read_articulation(out / "proposals.json").joints == []

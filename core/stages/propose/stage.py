@@ -79,8 +79,10 @@ def propose(capture: Capture, out: str | Path, progress: Progress,
     if not joints:
         kept = (f"{out / layout.PROPOSALS} is left as it was" if (out / layout.PROPOSALS).exists()
                 else f"no {layout.PROPOSALS} written")
+        seen = meta.get("nothing_seen", "")
         raise NothingFound(f"the {options.method} route found no joints; {kept}. "
-                           + _NOTHING_FOUND_HINT[options.method])
+                           + (f"{seen[0].upper()}{seen[1:]}. " if seen else "")
+                           + _NOTHING_FOUND_HINT[options.method], reason=seen)
     articulation = Articulation(joints, {"source": options.method, **meta})
     write_articulation(out / layout.PROPOSALS, articulation)
     for j in joints:
@@ -106,18 +108,21 @@ def no_joints(out: Path, method: str) -> Articulation:
     return empty
 
 
-def none_proposed(out: Path, options: dict[str, Any], progress: Progress) -> dict[str, Any]:
+def none_proposed(out: Path, options: dict[str, Any], progress: Progress, reason: str = ""
+                  ) -> dict[str, Any]:
     """``artgs run`` after the route found nothing: OUT/proposals.json with no joints, so the
     optimisation searches the interaction frames for parts that move (it adds them from what
     the frames show changing); a run whose optimisation cannot add parts (``--no-parts``) stops
-    here instead, as ``artgs propose`` does."""
+    here instead, as ``artgs propose`` does. ``reason``: why the route saw nothing (logged)."""
     method = options["propose"].method
+    why = f" ({reason})" if reason else ""
     if not options["optimise"].parts:
-        raise NothingFound(f"the {method} route found no joints and the optimisation may not "
-                           "add parts (--no-parts); " + _NOTHING_FOUND_HINT[method])
+        raise NothingFound(f"the {method} route found no joints{why} and the optimisation may "
+                           "not add parts (--no-parts); " + _NOTHING_FOUND_HINT[method],
+                           reason=reason)
     no_joints(out, method)
-    progress.log(f"propose: the {method} route found no joints; {layout.PROPOSALS} holds none and "
-                 "the optimisation searches the interaction frames for moving parts",
+    progress.log(f"propose: the {method} route found no joints{why}; {layout.PROPOSALS} holds "
+                 "none and the optimisation searches the interaction frames for moving parts",
                  level="warning")
     return {"joints": 0, "method": method, "types": [], "found": "none"}
 

@@ -14,7 +14,7 @@ from ....model.progress import QUIET, Progress
 from ....geometry.consistency import unsupported
 from ....geometry.rigid import StepData, by_motion, fit_both
 from .assemble import choose_type, finite, make_joint, snap_to_front, view_meta
-from .cameras import make_views, step_cloud
+from .cameras import InteractionView, make_views, step_cloud
 from .change import mark_changed, moving_at, vanish_times
 from .config import MotionConfig
 from .parts import group_parts
@@ -103,4 +103,20 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
                          "threshold_mm": 1000 * v.threshold,
                          "closed_state_threshold_mm": 1000 * v.ref_threshold} for v in views],
             "motion": diagnostics}
+    if not joints:
+        meta["nothing_seen"] = nothing_seen(views, min_points)
     return joints, meta
+
+
+def nothing_seen(views: list[InteractionView], min_points: int) -> str:
+    """Why the route saw no part, for the user: the change thresholds the depth noise set per
+    camera (far cameras measure with centimetres of noise, and a part that moves less than
+    the threshold in depth is not seen; a realistic cabinet at 6 m gave 54 and 67 cm)."""
+    def where(v: InteractionView) -> str:
+        d = v.ref[v.ref > 0]
+        span = f", object at {np.percentile(d, 2):.1f}-{np.percentile(d, 98):.1f} m" \
+            if d.size else ""
+        return f"{1000 * v.threshold:.0f} mm ({v.name}{span})"
+    return (f"no group of {min_points} or more splat points vanished in two steps or views; the "
+            "depth noise set change thresholds of " + ", ".join(map(where, views))
+            + ": a part that moves less than that in depth is not seen by this route")
