@@ -104,11 +104,11 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
                          "closed_state_threshold_mm": 1000 * v.ref_threshold} for v in views],
             "motion": diagnostics}
     if not joints:
-        meta["nothing_seen"] = nothing_seen(views, min_points)
+        meta["nothing_seen"] = nothing_seen(views, min_points, cfg)
     return joints, meta
 
 
-def nothing_seen(views: list[InteractionView], min_points: int) -> str:
+def nothing_seen(views: list[InteractionView], min_points: int, cfg: MotionConfig) -> str:
     """Why the route saw no part, for the user: the change thresholds the depth noise set per
     camera (far cameras measure with centimetres of noise, and a part that moves less than
     the threshold in depth is not seen; a realistic cabinet at 6 m gave 54 and 67 cm)."""
@@ -118,5 +118,7 @@ def nothing_seen(views: list[InteractionView], min_points: int) -> str:
             if d.size else ""
         return f"{1000 * v.threshold:.0f} mm ({v.name}{span})"
     return (f"no group of {min_points} or more splat points vanished in two steps or views; the "
-            "depth noise set change thresholds of " + ", ".join(map(where, views))
+            f"change thresholds ({cfg.noise_sigmas:g} noise sigmas of a camera's depth "
+            f"difference, at least {1000 * cfg.min_threshold:.0f} mm) were "
+            + ", ".join(map(where, views))
             + ": a part that moves less than that in depth is not seen by this route")
