@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import re
@@ -259,13 +260,9 @@ def test_nothing_seen_names_the_noise_thresholds(data):
     found = [float(x) for x in re.findall(r"(\d+) mm \(cam\d", err.value.reason)]
     assert len(found) == len(group_views(capture.interaction)), message
     assert all(abs(t - 5000 * math.sqrt(2) * 0.1) < 0.15 * 707 for t in found), found
-    logged = []
-
-    class Log(Progress):
-        def log(self, message: str, level: str = "info") -> None:
-            logged.append(message)
-
-    none_proposed(out, {"propose": ProposeOptions(), "optimise": OptimiseOptions()}, Log("quiet"),
-                  err.value.reason)
-    assert err.value.reason in logged[0]
+    stream = io.StringIO()
+    none_proposed(out, {"propose": ProposeOptions(), "optimise": OptimiseOptions()},
+                  Progress("json", stream=stream), err.value.reason)
+    logged = [json.loads(line) for line in stream.getvalue().splitlines()]
+    assert logged[0]["level"] == "warning" and err.value.reason in logged[0]["message"]
     assert read_articulation(out / "proposals.json").joints == []
