@@ -230,16 +230,11 @@ def test_type_by_depth_when_tracking_drifts(data):
     assert set(alt["states"]) == {str(t) for t in joints[k].states}
 
 
-def test_nothing_seen_names_the_noise_thresholds(data):
-    """Depth noise far above the door's motion (sigma 0.1 m added to every interaction depth
-    map): the route sees no part, and its error names each camera's change threshold, which
-    follows the added noise (5 sigma of a difference = 707 mm), and the files are left alone."""
-    from artgs.core.model.errors import NothingFound
-    from artgs.core.stages.propose.stage import none_proposed
-    from artgs.core.stages.propose.motion.cameras import group_views
-    from artgs.core.model.registry import OptimiseOptions
+def _noisy(data: Path, sigma: float) -> Path:
+    """A microwave capture with Gaussian noise of ``sigma`` (m) added to every interaction depth
+    map (the generator's own noise is millimetres)."""
     cap = _capture(data, "microwave", 1)
-    noisy = data / "microwave_noisy"
+    noisy = data / f"microwave_noise{sigma:g}"
     shutil.copytree(cap, noisy)
     tj = json.loads((noisy / "transforms.json").read_text())
     rng = np.random.default_rng(0)
@@ -247,7 +242,34 @@ def test_nothing_seen_names_the_noise_thresholds(data):
         if f.get("phase") == "interaction":
             path = noisy / f["depth_file_path"]
             d = np.load(path)
-            np.save(path, np.where(d > 0, d + rng.normal(0, 0.1, d.shape), 0).astype(d.dtype))
+            np.save(path, np.where(d > 0, d + rng.normal(0, sigma, d.shape), 0).astype(d.dtype))
+    return noisy
+
+
+def test_pooled_depth_sees_a_door_under_noise(data):
+    """10 cm depth noise (a camera several metres away) hides the microwave door from single
+    pixels (change threshold 5 sigma of a difference = 707 mm); pooling each camera's depth
+    (median of k x k pixels, k from the noise) finds it, with the right type and axis."""
+    noisy = _noisy(data, 0.1)
+    joints, meta, gt, scores = _run(noisy)
+    assert len(joints) >= 1 and all(c["pool"] > 1 for c in meta["cameras"]), meta["cameras"]
+    for c in meta["cameras"]:   # the pooled threshold follows the noise: 707 mm * 1.2533 / k
+        assert abs(c["threshold_mm"] - 707 * math.sqrt(math.pi / 2) / c["pool"]) \
+            < 0.15 * 707 / c["pool"], c
+    (door,) = scores
+    assert door.type_correct and door.axis_error_deg < 10 and door.origin_error_cm < 5, door
+
+
+def test_nothing_seen_names_the_noise_thresholds(data):
+    """Depth noise far above the door's motion even when pooled (sigma 0.5 m added to every
+    interaction depth map): the route sees no part, and its error names each camera's change
+    threshold and pooling, which follow the added noise (5 sigma of a difference of medians
+    of 7 x 7 pixels = 5 sqrt(2) 0.5 m 1.2533 / 7 = 633 mm), and the files are left alone."""
+    from artgs.core.model.errors import NothingFound
+    from artgs.core.stages.propose.stage import none_proposed
+    from artgs.core.stages.propose.motion.cameras import group_views
+    from artgs.core.model.registry import OptimiseOptions
+    noisy = _noisy(data, 0.5)
     out = data / "out_noisy"
     out.mkdir()
     capture = load_capture(noisy)
@@ -257,9 +279,10 @@ def test_nothing_seen_names_the_noise_thresholds(data):
     assert not (out / "proposals.json").exists()
     message = str(err.value)
     assert "no joints" in message and "not seen by this route" in message, message
-    found = [float(x) for x in re.findall(r"(\d+) mm \(cam\d", err.value.reason)]
+    found = re.findall(r"(\d+) mm \(cam\d[^)]*median of (\d+)x\d+ pixels", err.value.reason)
     assert len(found) == len(group_views(capture.interaction)), message
-    assert all(abs(t - 5000 * math.sqrt(2) * 0.1) < 0.15 * 707 for t in found), found
+    expected = 5000 * math.sqrt(2) * 0.5 * math.sqrt(math.pi / 2) / 7
+    assert all(abs(float(t) - expected) < 0.15 * expected and k == "7" for t, k in found), found
     stream = io.StringIO()
     none_proposed(out, {"propose": ProposeOptions(), "optimise": OptimiseOptions()},
                   Progress("json", stream=stream), err.value.reason)

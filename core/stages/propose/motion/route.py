@@ -36,17 +36,24 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
     cfg = config or MotionConfig()
     times = capture.times
     progress.update("propose", 0.02, "closed state per interaction camera")
-    views = make_views(capture, render_depth, cfg, robot_depth)
     pts = np.asarray(splat_means, float)[np.asarray(splat_opacity) >= cfg.min_opacity]
     spacing = float(np.median(cKDTree(pts).query(pts, k=2)[0][:, 1])) if len(pts) > 1 else 0.01
     pts = pts[~unsupported(pts, capture.static, max(cfg.min_threshold, 1.5 * spacing),
                            cfg.noise_sigmas)]
-    mark_changed(views, pts, spacing)
-    first, count, earliest = vanish_times(pts, views, times, spacing)
-    first[count < 2] = -1
     min_points = max(cfg.min_part_points, int(cfg.min_part_fraction * len(pts)))
-    parts = group_parts(pts, first, moving_at(pts, views, times), times,
-                        cfg.link_pixels * spacing, min_points, earliest=earliest)
+
+    def moving_parts(pool: int):
+        views = make_views(capture, render_depth, cfg, robot_depth, pool)
+        mark_changed(views, pts, spacing)
+        first, count, earliest = vanish_times(pts, views, times, spacing)
+        first[count < 2] = -1
+        return views, first, group_parts(pts, first, moving_at(pts, views, times), times,
+                                         cfg.link_pixels * spacing, min_points, earliest=earliest)
+
+    views, first, parts = moving_parts(cfg.pool or 1)
+    if not parts and cfg.pool == 0:   # single pixels too noisy (a far camera): pool depth
+        progress.update("propose", 0.05, "no part seen in single pixels; pooling depth")
+        views, first, parts = moving_parts(0)
     progress.update("propose", 0.1, f"{len(parts)} moving part(s)", parts=len(parts))
 
     clouds = {}
@@ -99,7 +106,7 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
         progress.update("propose", 0.1 + 0.9 * (k + 1) / len(parts), f"part {k + 1}: {joint.type}")
     meta = {"method": "motion",
             "view": view_meta(views[0]) if views else None,
-            "cameras": [{"name": v.name, "closed_state": v.ref_source,
+            "cameras": [{"name": v.name, "closed_state": v.ref_source, "pool": v.pool,
                          "threshold_mm": 1000 * v.threshold,
                          "closed_state_threshold_mm": 1000 * v.ref_threshold} for v in views],
             "motion": diagnostics}
@@ -111,12 +118,14 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
 def nothing_seen(views: list[InteractionView], min_points: int, cfg: MotionConfig) -> str:
     """Why the route saw no part, for the user: the change thresholds the depth noise set per
     camera (far cameras measure with centimetres of noise, and a part that moves less than
-    the threshold in depth is not seen; a realistic cabinet at 6 m gave 54 and 67 cm)."""
+    the threshold in depth is not seen; a realistic cabinet at 6 m gave 54 and 67 cm in single
+    pixels)."""
     def where(v: InteractionView) -> str:
         d = v.ref[v.ref > 0]
         span = f", object at {np.percentile(d, 2):.1f}-{np.percentile(d, 98):.1f} m" \
             if d.size else ""
-        return f"{1000 * v.threshold:.0f} mm ({v.name}{span})"
+        pool = f", median of {v.pool}x{v.pool} pixels" if v.pool > 1 else ""
+        return f"{1000 * v.threshold:.0f} mm ({v.name}{span}{pool})"
     return (f"no group of {min_points} or more splat points vanished in two steps or views; the "
             f"change thresholds ({cfg.noise_sigmas:g} noise sigmas of a camera's depth "
             f"difference, at least {1000 * cfg.min_threshold:.0f} mm) were "
