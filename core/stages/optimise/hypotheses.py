@@ -318,11 +318,15 @@ def moving_frames(model: ArticulatedSplat, frames, k: int) -> list[int]:
     return [i for i, ti in enumerate(frames.time_index) if v[ti] > 0.1 * v.max()]
 
 @torch.no_grad()
-def key_time(run, k: int) -> int:
+def key_time(run, k: int, changed: np.ndarray | None = None) -> int:
     """The time index where joint ``k`` at rest (others as fitted) explains the frames worst:
     where its part is furthest from closed, whatever the current hypothesis says. Never time
     0, where every joint is at rest: were it the worst explained (a realistic washing
-    machine's), every hypothesis would score alike there and the first would win."""
+    machine's), every hypothesis would score alike there and the first would win. ``changed``
+    (per time index, e.g. the share of a new part's Gaussians the frames show changing): only
+    times with at least half its largest value, where the part itself is seen moving; the
+    worst-explained time can be another part's doing (a realistic cabinet's drawers were
+    scored at a time only its door was open, and slid sideways)."""
     model, frames = run.model, run.frames
     snap = snapshot(model)
     model.states = model.states.clone()
@@ -331,6 +335,8 @@ def key_time(run, k: int) -> int:
     np.add.at(per_time, np.asarray(frames.time_index), run.evaluate(score_level(frames)))
     restore(model, snap)
     per_time[model.moving.cpu().numpy() == 0] = -np.inf
+    if changed is not None and np.max(changed) > 0:
+        per_time[changed < 0.5 * np.max(changed)] = -np.inf
     return int(np.argmax(per_time))
 
 def select_types(run, share: float, fixed: list[bool], tries: int = 24

@@ -61,7 +61,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     does not (:func:`unexplained`), grouped into connected clusters (at least 1 % of the
     Gaussians), of which the part that starts moving first (:func:`first_mover`) becomes a part
     hypothesis: hinges at its box edges and slides along its normal and box axes are scored by
-    rendering at its key time, the best is fitted (then, if needed, the best of the other
+    rendering at its key time (:func:`.hypotheses.key_time`, among the times its Gaussians change), the best is fitted (then, if needed, the best of the other
     type), and the part is kept only if it clearly lowers the image loss of the frames where it
     moves (:func:`clearly_better`) and its motion is plausible (:func:`implausible`). A kept
     part explains its changes (and those of what it hid), so the changes are found again before
@@ -95,7 +95,8 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         hyps = [(REVOLUTE, a, p) for a, p in hinge_lines(model, pts)]
         hyps += [(PRISMATIC, d, pts.mean(0)) for d in
                  [part_normal(model, k)] + list(np.linalg.svd(pts - pts.mean(0))[2])]
-        key = key_time(run, k)
+        # scored where its own Gaussians change (hits' row r: times r and r + 1)
+        key = key_time(run, k, np.concatenate([[0.0], hits[:, members].mean(1)]))
         scored = []
         for kind, axis, point in hyps:
             model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
