@@ -62,8 +62,9 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     Gaussians), of which the part that starts moving first (:func:`first_mover`) becomes a part
     hypothesis: hinges at its box edges and slides along its normal and box axes are scored by
     rendering at its key time (:func:`.hypotheses.key_time`, among the times its Gaussians
-    change), the best is fitted (then, if needed, the best of the other type), and the part is kept only if it clearly lowers the image loss of the frames where it
-    moves (:func:`clearly_better`) and its motion is plausible (:func:`implausible`). A kept
+    change), the best is fitted (then, if needed, the best of the other type), and the part is
+    kept only if it clearly lowers the image loss of the frames where it moves
+    (:func:`clearly_better`) and its motion is plausible (:func:`implausible`). A kept
     part explains its changes (and those of what it hid), so the changes are found again before
     the next of at most ``tries`` attempts; a rejected cluster is left out of the next ones (the
     frames may show another part moving beside a piece no joint explains). Returns the names of

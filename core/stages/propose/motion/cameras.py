@@ -125,6 +125,10 @@ def make_views(capture: Capture, render_depth, config: MotionConfig, robot_depth
     return views
 
 
+#: Noise of a median of n Gaussian samples is sqrt(pi / 2) / sqrt(n) sigma.
+MEDIAN_EFFICIENCY = math.sqrt(math.pi / 2.0)
+
+
 def pool_size(sigma: float, depth: np.ndarray, camera: Camera, config: MotionConfig) -> int:
     """The smallest odd window (at most ``config.max_pool``) whose pooled change threshold is no
     larger than its footprint on the object: depth then resolves motion as finely as the pooled
@@ -151,10 +155,6 @@ def pooled(depth: np.ndarray, k: int) -> np.ndarray:
         warnings.simplefilter("ignore", RuntimeWarning)
         med = np.nanmedian(windows, axis=-1)
     return np.where(depth > 0, med, 0.0).astype(np.float32)
-
-
-#: Noise of a median of n Gaussian samples is sqrt(pi / 2) / sqrt(n) sigma.
-MEDIAN_EFFICIENCY = math.sqrt(math.pi / 2.0)
 
 
 def _thresholds(v: InteractionView, sigma: float, config: MotionConfig, rendered: bool
