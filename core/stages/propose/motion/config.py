@@ -16,9 +16,9 @@ class MotionConfig:
 
     noise_sigmas: float = 5.0         # change threshold = this many noise sigmas (of a difference)
     min_threshold: float = 0.006      # ... but at least this (m)
-    pool: int = 0                     # depth = median over pool x pool pixels (odd; 1: none;
-                                      # 0: none, or per camera from its noise when none sees
-    max_pool: int = 7                 # no part; at most this: cameras.pool_size)
+    pool: int = 0                     # depth = median of pool x pool pixels (odd, 1 = none); 0:
+                                      # none, then per camera (cameras.pool_size) if no part
+    max_pool: int = 7                 # ... at most this window
     render_sigmas: float = 3.0        # closed state rendered from the splat: this many sigmas of
     render_threshold: float = 0.03    # its error, or this (m) when that cannot be measured
     min_opacity: float = 0.5          # splat points used as closed-state geometry
