@@ -8,8 +8,8 @@ Steps (all in the world frame, metres):
 2. Depth noise per camera comes from second differences of its depth maps on smooth surfaces; the
    change threshold is a multiple of it (for a rendered closed state, of the render's error).
    When single pixels show no moving part (a far camera's centimetres of noise hide it), depth is
-   pooled per camera (median over k x k pixels, k from its noise: ``cameras.pool_size``) and the
-   steps below run again on the pooled depth.
+   pooled per camera (median over k x k pixels, k from its noise: ``cameras.pooled_views``) and
+   the steps below run again on the pooled depth.
 3. A static splat point that the closed-state view sees and that a later step sees *through*
    (measured depth farther than the point by more than the threshold, or no object there) belongs
    to a moving part: rigid scenes cannot reveal what was behind a surface. Such points are grouped

@@ -96,12 +96,11 @@ def group_views(frames: list[Frame]) -> list[list[Frame]]:
     return [sorted(g, key=lambda f: f.time) for g in groups]
 
 
-def make_views(capture: Capture, render_depth, config: MotionConfig, robot_depth=None,
-               pool: int = 1) -> list[InteractionView]:
+def make_views(capture: Capture, render_depth, config: MotionConfig, robot_depth=None
+               ) -> list[InteractionView]:
     """Views of the interaction cameras; ``render_depth(camera) -> (H,W)`` gives the closed state
     where a camera has no time-0 frame; ``robot_depth(frame) -> (H,W) | None`` the robot twin's
-    depth (0 where it does not cover the pixel; see :func:`object_depth`). Depth is the median
-    over ``pool`` x ``pool`` pixels (:func:`pooled`; 0: per camera, :func:`pool_size`)."""
+    depth (0 where it does not cover the pixel; see :func:`object_depth`)."""
     t0 = CLOSED_TIME
     views = []
     for k, g in enumerate(group_views(capture.interaction)):
@@ -109,20 +108,40 @@ def make_views(capture: Capture, render_depth, config: MotionConfig, robot_depth
         for f in g:
             depth[f.time], free[f.time] = object_depth(
                 f, None if robot_depth is None else robot_depth(f), config.min_threshold)
-        sigma = noise_sigma(list(depth.values()))
-        window = pool or pool_size(sigma, depth[g[0].time], g[0].camera, config)
-        if window > 1:
-            depth = {t: pooled(d, window) for t, d in depth.items()}
-            sigma *= MEDIAN_EFFICIENCY / window
         if g[0].time == t0:
             ref, source = depth[t0], g[0].file_path
         else:
             ref, source = render_depth(g[0].camera).astype(np.float32), "splat"
-        v = InteractionView(f"cam{k}", g[0].camera, depth, free, ref, source, window)
-        v.threshold, v.ref_threshold = _thresholds(v, sigma, config, source == "splat")
+        v = InteractionView(f"cam{k}", g[0].camera, depth, free, ref, source)
+        v.threshold, v.ref_threshold = _thresholds(v, noise_sigma(list(depth.values())), config,
+                                                   source == "splat")
         v.rays = g[0].camera.pixel_rays()
         views.append(v)
     return views
+
+
+def pooled_views(views: list[InteractionView], config: MotionConfig, window: int = 0
+                 ) -> list[InteractionView]:
+    """``views`` with each camera's depth the median over ``window`` x ``window`` pixels
+    (:func:`pooled`; 0: per camera, :func:`pool_size`), a measured closed state with it, and
+    the thresholds of the pooled noise; free space, rendered closed states and rays are
+    shared (nothing is measured or rendered again)."""
+    out = []
+    for v in views:
+        sigma = noise_sigma(list(v.depth.values()))
+        k = window or pool_size(sigma, next(iter(v.depth.values())), v.camera, config)
+        if k <= 1:
+            out.append(v)
+            continue
+        depth = {t: pooled(d, k) for t, d in v.depth.items()}
+        rendered = v.ref_source == "splat"
+        p = InteractionView(v.name, v.camera, depth, v.free,
+                            v.ref if rendered else depth[CLOSED_TIME], v.ref_source, k)
+        p.threshold, p.ref_threshold = _thresholds(p, sigma * MEDIAN_EFFICIENCY / k, config,
+                                                   rendered)
+        p.rays = v.rays
+        out.append(p)
+    return out
 
 
 #: Noise of a median of n Gaussian samples is sqrt(pi / 2) / sqrt(n) sigma.

@@ -14,7 +14,7 @@ from ....model.progress import QUIET, Progress
 from ....geometry.consistency import unsupported
 from ....geometry.rigid import StepData, by_motion, fit_both
 from .assemble import choose_type, finite, make_joint, snap_to_front, view_meta
-from .cameras import InteractionView, make_views, step_cloud
+from .cameras import InteractionView, make_views, pooled_views, step_cloud
 from .change import mark_changed, moving_at, vanish_times
 from .config import MotionConfig
 from .parts import group_parts
@@ -42,18 +42,21 @@ def propose_motion(capture: Capture, splat_means: np.ndarray, splat_opacity: np.
                            cfg.noise_sigmas)]
     min_points = max(cfg.min_part_points, int(cfg.min_part_fraction * len(pts)))
 
-    def moving_parts(pool: int):
-        views = make_views(capture, render_depth, cfg, robot_depth, pool)
+    def moving_parts(views: list[InteractionView]):
         mark_changed(views, pts, spacing)
         first, count, earliest = vanish_times(pts, views, times, spacing)
         first[count < 2] = -1
-        return views, first, group_parts(pts, first, moving_at(pts, views, times), times,
-                                         cfg.link_pixels * spacing, min_points, earliest=earliest)
+        return first, group_parts(pts, first, moving_at(pts, views, times), times,
+                                  cfg.link_pixels * spacing, min_points, earliest=earliest)
 
-    views, first, parts = moving_parts(cfg.pool or 1)
+    views = make_views(capture, render_depth, cfg, robot_depth)
+    if cfg.pool > 1:
+        views = pooled_views(views, cfg, cfg.pool)
+    first, parts = moving_parts(views)
     if not parts and cfg.pool == 0:   # single pixels too noisy (a far camera): pool depth
         progress.update("propose", 0.05, "no part seen in single pixels; pooling depth")
-        views, first, parts = moving_parts(0)
+        views = pooled_views(views, cfg)
+        first, parts = moving_parts(views)
     progress.update("propose", 0.1, f"{len(parts)} moving part(s)", parts=len(parts))
 
     clouds = {}
