@@ -1078,22 +1078,6 @@ def _surface_labels(cap: Path, points: np.ndarray, joints) -> np.ndarray:
     return np.argmin(np.stack(distance, 1), 1)
 
 
-def test_a_part_takes_only_gaussians_the_frames_see_on_it():
-    """:func:`vote` on counts of frames (columns: base, part 1, part 2; support, against).
-    Contradicted at rest and seen on part 1: it moves there. Contradicted at rest and hidden
-    wherever a part puts it (outline fuzz, a floater): it stays in the base, since no frame shows
-    a part holding it. A part's Gaussian contradicted there goes back to the base unseen (what
-    no frame shows moving is the body's). A locked part neither gives nor takes."""
-    from artgs.core.stages.optimise.assign import vote
-
-    current = torch.tensor([0, 0, 1, 0, 2])
-    support = torch.tensor([[0., 6., 0.], [0., 1., 0.], [0., 0., 0.], [0., 5., 0.], [0., 0., 0.]])
-    against = torch.tensor([[8., 0., 9.], [8., 0., 0.], [0., 7., 7.], [8., 0., 9.], [0., 0., 8.]])
-    assert vote(current, support, against, [False, False]).tolist() == [1, 0, 0, 1, 0]
-    assert vote(current, support, against, [True, False]).tolist() == [0, 0, 1, 0, 0]
-    assert vote(current, support, against, [False, True]).tolist() == [1, 0, 0, 1, 2]
-
-
 def test_depth_votes_give_the_parts_back(cabinet):
     """The true parts (the generator's link surfaces) are what the frames' depth supports: from
     them nothing moves. From wrong parts (the door's Gaussians given to the base, the drawer's

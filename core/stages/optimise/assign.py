@@ -18,13 +18,7 @@ Counted over the interaction frames, a Gaussian leaves its part only where at le
 more frames see through it there than through it placed by another part (one frame may be a
 flying pixel); of those parts it joins the one with the most support less contradiction. Being
 hidden is no evidence, and support alone is not either (a surface that happens to lie where a
-wrong part puts a Gaussian supports it): Gaussians the frames do not contradict stay. A moving
-part must also be seen holding the Gaussian: at least ``MARGIN`` frames support it there. Else
-a Gaussian the frames contradict wherever it is seen (fuzz at the object's outline that an
-eroded mask leaves out, a floater) joins a part that hides it when it moves, which lowers the
-image loss and drags the part's joint (a PartNet washing machine's lid gained 930 Gaussians of
-its body's outline and turned 5 to 6 deg); the base needs no such support (what no frame shows
-moving is the body's: a drawer's Gaussians inside the body go back to it unseen). The
+wrong part puts a Gaussian supports it): Gaussians the frames do not contradict stay. The
 change is kept only when, refitted, it lowers the image loss over all frames
 (:func:`reassign`).
 """
@@ -80,27 +74,19 @@ def depth_votes(model: ArticulatedSplat, frames, cfg) -> tuple[torch.Tensor, tor
 
 def voted_labels(model: ArticulatedSplat, frames, cfg, locked: list[bool]) -> np.ndarray:
     """The hard labels with every Gaussian that the frames contradict where its part puts it
-    moved to the part they contradict least (module doc; :func:`vote`)."""
+    moved to the part they contradict least (module doc); Gaussians of locked joints' parts,
+    and moves to them, are left out."""
     current = torch.as_tensor(model.labels(), device=model.splat.means.device)
-    return vote(current, *depth_votes(model, frames, cfg), locked).cpu().numpy()
-
-
-def vote(current: torch.Tensor, support: torch.Tensor, against: torch.Tensor,
-         locked: list[bool]) -> torch.Tensor:
-    """New labels from the counts of :func:`depth_votes` (module doc): a Gaussian leaves its
-    part for one contradicted at least ``MARGIN`` frames less, and, a moving part, supported by
-    at least ``MARGIN``; of those, the most support less contradiction. Gaussians of locked
-    joints' parts, and moves to them, are left out."""
+    support, against = depth_votes(model, frames, cfg)
     here = against.gather(1, current[:, None])
     allowed = against <= here - MARGIN
-    allowed[:, 1:] &= support[:, 1:] >= MARGIN
     for k, is_locked in enumerate(locked):
         if is_locked:
             allowed[:, k + 1] = False
     score = torch.where(allowed, support - against, torch.full_like(support, -torch.inf))
     best = score.argmax(1)
     fixed = torch.tensor([False] + list(locked), device=current.device)[current]
-    return torch.where(allowed.any(1) & ~fixed, best, current)
+    return torch.where(allowed.any(1) & ~fixed, best, current).cpu().numpy()
 
 
 def reassign(run, steps: int, share: float, locked: list[bool]) -> dict[str, list[int]]:
