@@ -67,24 +67,18 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     (:func:`clearly_better`) and its motion is plausible (:func:`implausible`). A kept
     part explains its changes (and those of what it hid), so the changes are found again before
     the next of at most ``tries`` attempts; a rejected cluster is left out of the next ones (the
-    frames may show another part moving beside a piece no joint explains), unless its onsets
-    spread: then the next attempt takes the group's points of its most common onset alone
-    (``link`` 0; when they are a smaller piece of at least the minimum size), since parts side
-    by side that start moving a step or two apart chain into one group that no single motion
-    explains (a realistic cabinet's upper drawer, 1249 Gaussians starting at steps 13-16, with
-    314 of the lower drawer's starting at 11). Returns the names of the added joints."""
+    frames may show another part moving beside a piece no joint explains). Returns the names of
+    the added joints."""
     model, frames, cfg = run.model, run.frames, run.cfg
     means = model.splat.means.cpu().numpy().astype(float)
     added: list[str] = []
     tried = np.zeros(model.splat.n, bool)
     steps = max(run.options.iterations // 2, 1)
-    link = 2                      # onsets of one part: within this many steps of the commonest
     for attempt in range(tries):
         hits = unexplained(model, frames, cfg)
         flagged = np.flatnonzero(hits.any(0) & ~tried)
-        onset = hits[:, flagged].argmax(0)
-        smallest = max(10, model.splat.n // 100)
-        g = first_mover(means[flagged], onset, smallest, link)
+        g = first_mover(means[flagged], hits[:, flagged].argmax(0),
+                        max(10, model.splat.n // 100))
         if g is None:
             break
         members = np.zeros(model.splat.n, bool)
@@ -141,14 +135,8 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             model.drop(k)
             run.trust = run.trust[:-1]
             restore(model, kept)
-            core = first_mover(means[flagged], onset, smallest, 0) if link else None
-            if core is not None and len(core) < len(g):   # its commonest onset alone next
-                link = 0
-            else:
-                tried |= members
-                link = 2
+            tried |= members
             continue
-        link = 2
         into = merge_target(run, k, after)
         if into is None:
             added.append(name)
