@@ -241,47 +241,14 @@ def score_level(frames: FrameSet) -> int:
     return min(1, len(frames.levels) - 1)
 
 
-#: Halvings of the candidate grid's step around its best value (:func:`lowest`).
-HALVINGS = 2
-
-
-def lowest(loss_of: Callable[[float], float], candidates: np.ndarray,
-           halvings: int = HALVINGS) -> tuple[float, float]:
-    """The lowest ``(loss, value)`` of ``loss_of`` over the ``candidates`` (a grid, perhaps
-    with extra values: its step is the median spacing), the first where several tie; then
-    around the best, the values half the step either side, the step halved ``halvings`` times
-    (a value replaces the best only when strictly lower). A grid alone turns a part opened
-    less than its step into a part not moving: a realistic oven's door opened 10 deg lies
-    between the hinge grid's 0 and 15 deg, every time's search ended at 0, and its true hinge
-    so searched explained the frames worse (0.3680) than the part's slide fitted before the
-    type choice (0.3667), though with its true states it explained them better (0.3628)."""
-    best = (np.inf, 0.0)
-    for v in candidates:
-        loss = loss_of(float(v))
-        if loss < best[0]:
-            best = (loss, float(v))
-    step = float(np.median(np.diff(np.sort(np.asarray(candidates, float))))) \
-        if len(candidates) > 1 else 0.0
-    centre = best[1]
-    for _ in range(halvings if step > 0 else 0):
-        step /= 2
-        for v in (centre - step, centre + step):
-            loss = loss_of(v)
-            if loss < best[0]:
-                best = (loss, v)
-        centre = best[1]
-    return best
-
-
 @torch.no_grad()
 def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitConfig,
                   candidates: np.ndarray) -> None:
-    """Set joint ``k``'s state at every moving time to the value (rad / m) with the lowest
-    image loss (others as they are) at :func:`score_level`, over the candidates and, around
-    the best, finer (:func:`lowest`) (at the coarsest level a small part is lost in the blur
-    and best moved anywhere: a PartNet dishwasher's front 7.7 cm out was searched to 58 cm
-    there), then each value the median of itself and its neighbours in time
-    (:func:`median3`)."""
+    """Set joint ``k``'s state at every moving time to the candidate value (rad / m) with the
+    lowest image loss (others as they are) at :func:`score_level` (at the coarsest level a small
+    part is lost in the blur and best moved anywhere: a PartNet dishwasher's front 7.7 cm out
+    was searched to 58 cm there), then each value the median of itself and its neighbours in
+    time (:func:`median3`)."""
     level = score_level(frames)
     unit = model.unit_of(model.types[k])
     states = model.states.clone()
@@ -289,12 +256,13 @@ def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitCon
         if t == 0:
             continue
         ids = frames.at_time(ti)
-
-        def loss_of(v: float) -> float:
-            model.states[k, ti] = v / unit
-            return sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids)
-
-        states[k, ti] = lowest(loss_of, candidates)[1] / unit
+        best, best_v = np.inf, 0.0
+        for v in candidates:
+            model.states[k, ti] = float(v) / unit
+            loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids)
+            if loss < best:
+                best, best_v = loss, float(v)
+        states[k, ti] = best_v / unit
         model.states[k, ti] = states[k, ti]
     at_rest = (states[k] * model.moving).cpu().numpy()       # time 0's value is 0
     states[k] = torch.as_tensor(median3(at_rest), device=states.device)

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from ...geometry.rigid import JointFit, fit_both, kabsch
-from .fit import lowest, part_level, score_level, search_states, skip_draws
+from .fit import part_level, score_level, search_states, skip_draws
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot, unshaded
 from .plausible import HIDDEN_SHARE, into_body
@@ -297,19 +297,18 @@ def circle_centre(path: np.ndarray, basis: np.ndarray) -> np.ndarray | None:
 @torch.no_grad()
 def score_at(model: ArticulatedSplat, frames, cfg, k: int, ti: int, values: np.ndarray) -> \
         tuple[float, float]:
-    """Lowest image loss (half resolution) at time index ``ti`` over joint ``k``'s candidate
-    ``values`` (rad / m) and, around the best, finer (:func:`.fit.lowest`), and the value
-    reaching it."""
+    """Lowest image loss (half resolution) at time index ``ti`` over joint ``k``'s candidate ``values``
+    (rad / m), and the value reaching it."""
     from .fit import frame_loss
     level = score_level(frames)
     ids = frames.at_time(ti)
     unit = model.unit_of(model.types[k])
-
-    def loss_of(v: float) -> float:
-        model.states[k, ti] = v / unit
-        return sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids) / len(ids)
-
-    return lowest(loss_of, values)
+    best = (np.inf, 0.0)
+    for v in values:
+        model.states[k, ti] = float(v) / unit
+        loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids) / len(ids)
+        best = min(best, (loss, float(v)))
+    return best
 
 def moving_frames(model: ArticulatedSplat, frames, k: int) -> list[int]:
     """Frames where joint ``k`` is away from 0 by more than 10 % of its largest value."""
