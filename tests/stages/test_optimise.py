@@ -964,6 +964,19 @@ def test_a_proposals_type_stays_unless_the_other_is_clearly_better():
     assert chosen([own, restart, far], "prismatic")[1] == "hinge"
 
 
+def test_a_type_that_fits_one_camera_and_not_the_other_does_not_replace_the_proposals():
+    """The other type must also be lower in the frames of every camera: a hypothesis that fits
+    one view better and the other worse explains a view, not the motion."""
+    from artgs.core.stages.optimise.hypotheses import chosen
+    cams = np.array([0, 0, 1, 1])
+    own = (np.array([1.0, 1.0, 1.0, 1.0]), "slide", "prismatic", False, False)
+    one_view = (np.array([0.99, 0.99, 1.001, 1.001]), "hinge", "revolute", False, False)
+    both = (np.array([0.99, 0.99, 0.999, 0.999]), "hinge", "revolute", False, False)
+    assert chosen([own, one_view], "prismatic")[1] == "hinge"
+    assert chosen([own, one_view], "prismatic", cams)[1] == "slide"
+    assert chosen([own, both], "prismatic", cams)[1] == "hinge"
+
+
 def test_a_fit_that_opens_the_part_into_the_body_is_not_chosen():
     """A fit moving its part behind what the static views measured loses to any that does not,
     however low its loss; when every fit does, the loss decides as before."""
