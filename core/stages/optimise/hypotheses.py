@@ -618,6 +618,7 @@ def every_camera_lower(without: np.ndarray, with_: np.ndarray,
     return all(with_[cameras == c].mean() < without[cameras == c].mean()
                for c in np.unique(cameras))
 
+
 def remove_spurious(run, locked: list[bool]) -> list[str]:
     """Remove the joints whose motion does not clearly explain the frames where the part moves
     (:func:`clearly_better`) better than the part left at rest (state 0 at every time, i.e.
