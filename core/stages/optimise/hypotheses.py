@@ -14,8 +14,7 @@ Missed parts are added in :mod:`.missed`; what the frames show moving is found i
 
 from __future__ import annotations
 
-from contextlib import contextmanager
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import numpy as np
 import torch
@@ -23,7 +22,7 @@ import torch
 from ...geometry.rigid import JointFit, fit_both, kabsch
 from .fit import part_level, score_level, search_states, skip_draws
 from .kinematics import PRISMATIC, REVOLUTE
-from .model import ArticulatedSplat, restore, snapshot, unshaded
+from .model import ArticulatedSplat, restore, snapshot, unshaded, vanished
 from .plausible import HIDDEN_SHARE, into_body
 from .seen import seen_moving
 
@@ -343,12 +342,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
                  ) -> dict[str, dict[str, Any]]:
     """Keep, per joint, the type and line whose fit explains the frames where it moves best.
 
-    ``fixed`` joints (trusted user joints, locked joints) keep their type and line. Joints are
-    taken in the order of the share of the loss their motion explains (:func:`explained`): a
-    joint's choice changes what the others' fits see, and a piece of junk chosen first can
-    spoil a real part's evidence (a PartNet drawer's true piece, its slide 0.6113 before a
-    junk part merged from three proposals turned to a slide, 0.6403 after, lost to a hinge at
-    0.6296). The joint's
+    ``fixed`` joints (trusted user joints, locked joints) keep their type and line. The joint's
     hypotheses of both types (:func:`tool_hypotheses` when a robot held the parts, the
     proposal's joint of the other type, :func:`alternative_of`, :func:`hypotheses_of`) are
     scored by rendering at half resolution at the time the part moves most (its value
@@ -378,11 +372,6 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 24
     model, frames, cfg = run.model, run.frames, run.cfg
     evidence: dict[str, dict[str, Any]] = {}
     todo = [k for k in range(model.k) if not fixed[k]]
-    gains = {k: explained(run, k) for k in todo} if len(todo) > 1 else {}
-    todo.sort(key=lambda k: -gains.get(k, 0.0))
-    if gains:
-        run.progress.log("type choice in the order of the share each motion explains: " + ", ".join(
-            f"{model.names[k]} {gains[k]:.2%}" for k in todo))
     steps = max(run.options.iterations // 2, 1)
     for k in todo:
         name = model.names[k]
@@ -659,10 +648,9 @@ def remove_spurious(run, locked: list[bool]) -> list[str]:
             k += 1
     return removed
 
-def without_motion(run, k: int, gone: bool = True
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def without_motion(run, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-frame image losses (unshaded) of the model as it is, with joint ``k``'s part at rest
-    (state 0 at every time) and, if ``gone``, with its part gone (:func:`vanished`)."""
+    (state 0 at every time) and with its part gone (:func:`.model.vanished`)."""
     model = run.model
     with unshaded(model):
         here = run.evaluate()
@@ -672,34 +660,9 @@ def without_motion(run, k: int, gone: bool = True
             model.states[k] = 0.0
         rest = run.evaluate()
         restore(model, snap)
-        if not gone:
-            return here, rest, None
         with vanished(model, k):
             return here, rest, run.evaluate()
 
-
-def explained(run, k: int) -> float:
-    """The share of the image loss where joint ``k``'s part moves (all frames if nowhere) that
-    its motion explains: the smaller relative gain of the model over the part left at rest and
-    over the part gone (:func:`without_motion`; the evidence :func:`remove_spurious` asks for)."""
-    ids = moving_frames(run.model, run.frames, k) or slice(None)
-    here, rest, gone = without_motion(run, k)
-    return float(min(rest[ids].mean(), gone[ids].mean()) / max(here[ids].mean(), 1e-12) - 1)
-
-
-@contextmanager
-def vanished(model: ArticulatedSplat, k: int) -> Iterator[None]:
-    """Joint ``k``'s part made transparent for the duration (its Gaussians' opacity logits at
-    -30; restored after)."""
-    splat = model.splat
-    kept = splat.opacity_logits
-    gone = kept.clone()
-    gone[torch.as_tensor(model.labels() == k + 1, device=kept.device)] = -30.0
-    splat.opacity_logits = gone
-    try:
-        yield
-    finally:
-        splat.opacity_logits = kept
 
 #: Joints fitted this close are one joint (axes within the angle, lines within the share of
 #: the object's size, states within the share of their range): :func:`merge_duplicates`.

@@ -119,6 +119,9 @@ class ArticulatedSplat:
         self.camera_of: list[int] = []
         self.cameras = torch.zeros(0, 6, **f)
         self.refine_cameras = False
+        # Gaussians drawn fully transparent (:func:`vanished`); part of :meth:`state`, so a
+        # helper process renders them so too
+        self.transparent: torch.Tensor | None = None
         tree = cKDTree(splat.means.cpu().numpy())
         k = min(knn + 1, splat.n)
         self.neighbours = torch.as_tensor(tree.query(splat.means.cpu().numpy(), k)[1][:, 1:],
@@ -236,7 +239,9 @@ class ArticulatedSplat:
             c = self.cameras[self.camera_of[view.index]]
             means, quats = camera_motion(means, quats, view.w2c, c[:3], c[3:] * self.size)
         s = self.splat
-        g = Gaussians(means, quats, s.log_scales, s.opacity_logits,
+        opacity = s.opacity_logits if self.transparent is None else \
+            s.opacity_logits.masked_fill(self.transparent, -30.0)
+        g = Gaussians(means, quats, s.log_scales, opacity,
                       self.shaded(self.colours(view, ti, motions), ti))
         if view.occluder is not None:
             g = concat(g, view.occluder)
@@ -445,6 +450,20 @@ def unshaded(model: ArticulatedSplat) -> Iterator[None]:
         yield
     finally:
         model.shading = before
+
+
+@contextmanager
+def vanished(model: ArticulatedSplat, k: int) -> Iterator[None]:
+    """Joint ``k``'s part drawn transparent for the duration (its Gaussians' opacity logits at
+    -30 in :meth:`ArticulatedSplat.render`; a model attribute, not the splat, so that a helper
+    process, which is sent the model's state and not its splat, renders it gone too)."""
+    before = model.transparent
+    model.transparent = torch.as_tensor(model.labels() == k + 1,
+                                        device=model.splat.opacity_logits.device)
+    try:
+        yield
+    finally:
+        model.transparent = before
 
 
 def snapshot(model: ArticulatedSplat) -> tuple:
