@@ -4,6 +4,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 DEMO_OUT ?= out/demo
+# Test worker processes (pytest-xdist), each a whole test file at a time (its module fixtures are
+# made once); most tests are one thread's Python and torch dispatch, so two fill two cores.
+TEST_WORKERS ?= 2
 
 .PHONY: demo test env extension
 
@@ -17,9 +20,10 @@ env: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/python scripts/demo.py $(DEMO_OUT)
 
-# The whole suite with bpy 4.5, then the Blender-side tests under bpy 5.x (.venv-bpy5/, Python 3.13).
+# The whole suite with bpy 4.5 (TEST_WORKERS processes; the slowest tests listed at the end), then
+# the Blender-side tests under bpy 5.x (.venv-bpy5/, Python 3.13).
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=15
 	$(BIN)/python scripts/test_blender5.py
 
 extension: $(STAMP)
