@@ -680,8 +680,15 @@ def test_true_joints_gain_no_part(cabinet, tmp_path):
     assert figures["added"] == [] and figures["removed"] == [] and figures["joints"] == 2
     part = np.random.default_rng(0).uniform(0, 1, (4000, 3)) * [0.8, 0.5, 0.1]   # 0.9 m across
     assert part_size(part) == pytest.approx(0.96 * np.sqrt(0.8 ** 2 + 0.5 ** 2 + 0.1 ** 2), rel=0.02)
-    assert little_motion("revolute", np.radians(0.6), part)
-    assert not little_motion("revolute", np.radians(30), part)
+    # a hinge along the part's 0.5 m edge (reach 0.8 m): displaced 5 % of 0.96 m at 3.3 deg
+    edge = dict(axis=np.array([0.0, 1.0, 0.0]), origin=np.zeros(3))
+    assert little_motion("revolute", np.radians(0.6), part, **edge)
+    assert little_motion("revolute", np.radians(3.0), part, **edge)
+    assert not little_motion("revolute", np.radians(9.9), part, **edge)
+    assert not little_motion("revolute", np.radians(30), part, **edge)
+    # about its middle (reach 0.4 m) the same turn moves it half as far
+    assert little_motion("revolute", np.radians(5.0), part, np.array([0.0, 1.0, 0.0]),
+                         np.array([0.4, 0.0, 0.05]))
     # a slide is measured against its part: 4 cm is little for this part, not for one half as big
     assert little_motion("prismatic", 0.04, part) and not little_motion("prismatic", 0.04, part / 2)
 

@@ -159,7 +159,8 @@ def implausible(model: ArticulatedSplat, k: int) -> str | None:
     kind = model.types[k]
     values = np.array(list(model.joint_values(k).values()))
     span = float(np.ptp([0.0, *values]))
-    if little_motion(kind, span, part_points(model, k, limit=model.splat.n)):
+    axes, origins = model.joint_lines()
+    if little_motion(kind, span, part_points(model, k, limit=model.splat.n), axes[k], origins[k]):
         unit = "rad" if kind == REVOLUTE else "m"
         return f"it barely moves ({span:.3f} {unit}): an invented part must move visibly"
     if hinge_off_part(model, k):

@@ -313,7 +313,7 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
 
     confidence = 1 / (1 + residual), times min(1, 0.5 + 5 × type margin) when both types were
     fitted (a 10 % lower loss than the other type counts as decisive), halved when the evidence
-    is weak (under 10° or 5 % of the part's size of motion seen, or under 50 Gaussians) or the
+    is weak (the part displaced by under 5 % of its size, or under 50 Gaussians) or the
     part opens into the body (:func:`.plausible.into_body` in ``space``, the static views).
     ``depth``: per joint the report of the depth refinement (:mod:`.depth_fit`), kept in the
     joint's ``extra["depth_fit"]``.
@@ -345,7 +345,7 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
         residual = float(losses[moving].mean()) if moving else float(losses.mean())
         ev = evidence.get(name, {})
         warnings = []
-        if little_motion(kind, hi - lo, pts):
+        if little_motion(kind, hi - lo, pts, axis, origin):
             warnings.append("little motion seen")
         if len(pts) < 50:
             warnings.append("part has few Gaussians")
