@@ -686,11 +686,13 @@ def test_true_joints_gain_no_part(cabinet, tmp_path):
     assert little_motion("revolute", np.radians(3.0), part, **edge)
     assert not little_motion("revolute", np.radians(9.9), part, **edge)
     assert not little_motion("revolute", np.radians(30), part, **edge)
-    # about its middle (reach 0.4 m) the same turn moves it half as far
+    # 5 deg moves it 7 cm about that edge, half as far about its middle (reach 0.4 m)
+    assert not little_motion("revolute", np.radians(5.0), part, **edge)
     assert little_motion("revolute", np.radians(5.0), part, np.array([0.0, 1.0, 0.0]),
                          np.array([0.4, 0.0, 0.05]))
     # a slide is measured against its part: 4 cm is little for this part, not for one half as big
-    assert little_motion("prismatic", 0.04, part) and not little_motion("prismatic", 0.04, part / 2)
+    assert little_motion("prismatic", 0.04, part, **edge)
+    assert not little_motion("prismatic", 0.04, part / 2, **edge)
 
 
 # --- camera refinement ---------------------------------------------------------------------------

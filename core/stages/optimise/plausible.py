@@ -28,8 +28,8 @@ from ...model.joints import joint_transform
 LITTLE_MOVE = 0.05
 
 
-def little_motion(kind: str, span: float, points: np.ndarray, axis: np.ndarray | None = None,
-                  origin: np.ndarray | None = None) -> bool:
+def little_motion(kind: str, span: float, points: np.ndarray, axis: np.ndarray,
+                  origin: np.ndarray) -> bool:
     """Whether a ``kind`` joint's observed range ``span`` (rad / m) is barely any motion for its
     part (``points``, N×3): the part's largest displacement over that range, a slide's ``span``
     or a hinge's ``span`` times its reach (98th percentile of the part's distances from the line
@@ -41,7 +41,7 @@ def little_motion(kind: str, span: float, points: np.ndarray, axis: np.ndarray |
     size = part_size(points)
     if kind != "revolute":
         return span < LITTLE_MOVE * size
-    if len(points) < 3 or axis is None or origin is None:
+    if len(points) < 3:
         return True
     a = np.asarray(axis, float) / np.linalg.norm(axis)
     d = np.asarray(points, float) - np.asarray(origin, float)
