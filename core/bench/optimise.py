@@ -158,8 +158,8 @@ def comparison(title: str, base: dict, row: dict) -> str:
 def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
     """``artgs bench-optimise [--set tight|realistic|partnet:DIR|data:DIR] [--per-category N]
     [--seed S] [--category C ...] [--width W --height H] [--iterations N] [--opt-iterations N]
-    [--basin N] [--robot R]``."""
-    base = OptimiseOptions(iterations=args.opt_iterations, device=args.device)
+    [--opt-seed S] [--basin N] [--robot R]``."""
+    base = OptimiseOptions(iterations=args.opt_iterations, device=args.device, seed=args.opt_seed)
     bset = parse_set(args.set, args.data)
     variants = plan_variants(bset, args.robot)
     with tempfile.TemporaryDirectory(prefix="artgs-bench-optimise-") as tmp:
@@ -188,7 +188,7 @@ def bench_optimise(args: BenchOptimiseOptions, progress: Progress) -> int:
                                                for v, b, a, _ in tables]))
         return 0
     print(f"set {bset.label}, {len(sets[0][1])} captures, splat {splat_label(args.iterations)}, "
-          f"optimisation iterations {args.opt_iterations}")
+          f"optimisation iterations {args.opt_iterations}, seed {args.opt_seed}")
     for v, before, after, results in tables:
         if len(tables) > 1:
             print(f"\n{v.title}:")

@@ -80,6 +80,8 @@ class BenchOptimiseOptions(SetOptions):
     """``artgs bench-optimise``: joint accuracy without and with the optimisation; basin rate."""
 
     opt_iterations: int = option(300, "steps of the main articulation fit")
+    opt_seed: int = option(0, "random seed of the articulation fit (the frames each step draws): "
+                           "runs with other seeds show how much one run tells")
     basin: int = option(0, "perturbed-start runs per capture (10-30 deg, 5-15 cm; every second "
                         "one also of the wrong type, without states) for the basin rate")
     robot: str | None = _in_view_robot()

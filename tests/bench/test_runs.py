@@ -34,6 +34,32 @@ def test_robot_flags_parse():
         is None
 
 
+def test_opt_seed_reaches_the_optimisation(monkeypatch):
+    """bench-optimise --opt-seed S: every capture's optimisation runs with seed S (default 0)."""
+    from artgs.core.bench import optimise as bench_opt
+
+    class Stop(Exception):
+        pass
+
+    def run_once(sets, run, *a):
+        run(Path("cap"), Path("work"), runs.ROBOT_FREE)
+        raise Stop
+
+    def capture(cap, work, options, *a):
+        seen.append(options.seed)
+
+    assert build(BenchOptimiseOptions, build_parser().parse_args(["bench-optimise"])).opt_seed == 0
+    seen: list[int] = []
+    monkeypatch.setattr(bench_opt, "materialise_variants", lambda *a, **k: [])
+    monkeypatch.setattr(bench_opt, "run_variants", run_once)
+    monkeypatch.setattr(bench_opt, "bench_capture", capture)
+    opts = build(BenchOptimiseOptions,
+                 build_parser().parse_args(["bench-optimise", "--opt-seed", "3"]))
+    with pytest.raises(Stop):
+        bench_opt.bench_optimise(opts, QUIET)
+    assert seen == [3]
+
+
 def test_bad_robot_flags_exit_2(tmp_path, capsys):
     """An unknown robot, or a robot in view on a data: set, exits 2 naming the option."""
     with pytest.raises(SystemExit) as exc:
