@@ -43,10 +43,16 @@ def little_motion(kind: str, span: float, points: np.ndarray, axis: np.ndarray,
         return span < LITTLE_MOVE * size
     if len(points) < 3:
         return True
+    reach = float(np.percentile(line_distances(points, axis, origin), 98))
+    return span * reach < LITTLE_MOVE * size
+
+
+def line_distances(points: np.ndarray, axis: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """Distance of each of ``points`` (N×3) from the line ``axis`` (any length) through
+    ``origin``."""
     a = np.asarray(axis, float) / np.linalg.norm(axis)
     d = np.asarray(points, float) - np.asarray(origin, float)
-    reach = float(np.percentile(np.linalg.norm(d - np.outer(d @ a, a), axis=1), 98))
-    return span * reach < LITTLE_MOVE * size
+    return np.linalg.norm(d - np.outer(d @ a, a), axis=1)
 
 
 def part_size(points: np.ndarray) -> float:
@@ -73,9 +79,7 @@ def off_part(axis: np.ndarray, origin: np.ndarray, points: np.ndarray) -> bool:
     about a line 0.31 of its size away, invented parts of a tight microwave 0.49-0.56)."""
     if len(points) < 3:
         return False
-    axis = np.asarray(axis, float) / np.linalg.norm(axis)
-    d = np.asarray(points, float) - origin
-    r = np.linalg.norm(d - np.outer(d @ axis, axis), axis=1)
+    r = line_distances(points, axis, origin)
     return float(np.percentile(r, 2)) > HINGE_REACH * part_size(points)
 
 
