@@ -20,6 +20,9 @@ Steps (each fit is :func:`.fit.fit`):
    (:func:`.missed.add_missed`),
    then, if any was added, step 4's fits again (at half length), the spurious-part test and,
    for the added parts, the into-body test (:func:`.missed.drop_into_body`);
+   duplicates merged once more, then every joint tested once more against its part at rest,
+   gone, and moving with each other joint (:func:`.hypotheses.remove_spurious`, ``join``),
+   after the last fits: the earlier tests ran before them;
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
    each joint refined last on the frames' depth (:mod:`.depth_fit`);
 5. report per joint residual, observed range and confidence.
@@ -250,6 +253,12 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         added = [name for name in added if name not in again]
     if options.parts and model.k:   # ... and once more, fitted with their final parts
         merged += hypotheses.merge_duplicates(run, fixed())
+        # each joint against the others after the last fits: a piece their joint explains
+        # as well joins it, a motion no better than rest or gone is dropped
+        late = hypotheses.remove_spurious(run, locked=model.locked.tolist(), join=True)
+        removed += [name for name in late if name not in added]
+        rejected += [name for name in late if name in added]
+        added = [name for name in added if name not in late]
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
     losses = run.evaluate()
