@@ -540,6 +540,18 @@ def _halves(door):
     return halves
 
 
+def _pieces_run(cabinet: Path, degrees: float, metres: float):
+    """A Runner of the drawer and the door as two pieces (:func:`_halves`) on the true parts,
+    the lower piece's joint turned by ``degrees`` and moved by ``metres``."""
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    door = next(j for j in gt if j.type == "revolute")
+    drawer = next(j for j in gt if j.type == "prismatic")
+    upper, lower = _halves(door)
+    wrong = _perturb(lower, degrees, metres, seed=3)
+    return _runner(capture, [drawer, upper, lower], [drawer, upper, wrong], OptimiseOptions())[1]
+
+
 def test_pieces_of_one_door_become_one_joint(cabinet, tmp_path):
     """The door proposed as two pieces (:func:`_halves`): one joint is left, on the door's
     line."""
@@ -564,13 +576,7 @@ def test_one_joint_takes_a_piece_its_own_fit_moves_wrongly(cabinet):
     otherwise, is never taken."""
     from artgs.core.stages.optimise.hypotheses import one_explains_both, same_joint
 
-    capture = load_capture(cabinet)
-    gt = read_articulation(cabinet / "gt.json").joints
-    door = next(j for j in gt if j.type == "revolute")
-    drawer = next(j for j in gt if j.type == "prismatic")
-    upper, lower = _halves(door)
-    wrong = _perturb(lower, 40.0, 0.1, seed=3)
-    _, run = _runner(capture, [drawer, upper, lower], [drawer, upper, wrong], OptimiseOptions())
+    run = _pieces_run(cabinet, 40.0, 0.1)
     labels = run.model.labels().copy()
     assert not same_joint(run.model, 1, 2)
     pairs = one_explains_both(run, [False] * 3)
@@ -620,19 +626,14 @@ def test_the_last_test_gives_a_piece_to_the_joint_that_moves_it(cabinet):
     them best, and that joint, tested again, stays. The drawer keeps its joint and part."""
     from artgs.core.stages.optimise.hypotheses import remove_spurious
 
-    capture = load_capture(cabinet)
-    gt = read_articulation(cabinet / "gt.json").joints
-    door = next(j for j in gt if j.type == "revolute")
-    drawer = next(j for j in gt if j.type == "prismatic")
-    upper, lower = _halves(door)
-    wrong = _perturb(lower, 8.0, 0.02, seed=3)
-    _, run = _runner(capture, [drawer, upper, lower], [drawer, upper, wrong], OptimiseOptions())
+    run = _pieces_run(cabinet, 8.0, 0.02)
     before = run.model.labels().copy()
     assert remove_spurious(run, [False] * 3) == ["lower"]
     assert np.array_equal(run.model.labels()[before == 3], np.zeros((before == 3).sum()))
-    _, run = _runner(capture, [drawer, upper, lower], [drawer, upper, wrong], OptimiseOptions())
+    run = _pieces_run(cabinet, 8.0, 0.02)
+    drawer = run.model.names[0]
     assert remove_spurious(run, [False] * 3, join=True) == ["lower"]
-    assert run.model.names == [drawer.name, "upper"]
+    assert run.model.names == [drawer, "upper"]
     labels = run.model.labels()
     assert np.array_equal(labels[before == 3], np.full((before == 3).sum(), 2))
     assert np.array_equal(labels[before < 3], before[before < 3])
