@@ -635,7 +635,7 @@ def remove_spurious(run, locked: list[bool], join: bool = False) -> list[str]:
     model, frames = run.model, run.frames
     removed = []
     while True:
-        weakest = None      # (gain, k, what failed, its loss, outcome's label)
+        weakest = None      # (gain, k, what failed, its loss, the loss moving, outcome)
         for k in range(model.k):
             if locked[k]:
                 continue
@@ -652,7 +652,7 @@ def remove_spurious(run, locked: list[bool], join: bool = False) -> list[str]:
                            float(here[sel].mean()), outcome)
         if weakest is None:
             return removed
-        _, k, what, loss, moving, (where, _, label) = weakest
+        _, k, what, loss, moving, (_, _, label) = weakest
         name = model.names[k]
         goes = "" if label == 0 else f"; its part joins {model.names[label - 1]}'s"
         run.progress.log(f"{name}: removed ({what} the loss is {loss:.4f} where it moves, "
@@ -679,18 +679,26 @@ def alternatives(run, k: int, join: bool) -> tuple[np.ndarray, list[tuple]]:
     if not join:
         return here, alts
     model = run.model
-    hard = model.hard
-    members = torch.as_tensor(model.labels() == k + 1, device=hard.device)
     for j in range(model.k):
-        if j == k:
-            continue
-        h = hard.clone()
-        h[members] = j + 1
-        model.hard = h
-        with unshaded(model):
-            alts.append((f"moving with {model.names[j]}", run.evaluate(), j + 1))
-        model.hard = hard
+        if j != k:
+            with unshaded(model):
+                alts.append((f"moving with {model.names[j]}", moved_with(run, k, j), j + 1))
     return here, alts
+
+
+@torch.no_grad()
+def moved_with(run, k: int, j: int) -> np.ndarray:
+    """Per-frame image losses of the model with joint ``k``'s Gaussians moved by joint ``j``
+    instead (the hard assignment changed for the evaluation only)."""
+    model = run.model
+    hard = model.hard
+    h = hard.clone()
+    h[torch.as_tensor(model.labels() == k + 1, device=hard.device)] = j + 1
+    model.hard = h
+    try:
+        return run.evaluate()
+    finally:
+        model.hard = hard
 
 
 def without_motion(run, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -8,7 +8,7 @@ import torch
 
 from .fit import part_level, search_states
 from .hypotheses import (REMOVE_TOL, clearly_better, hidden_share, hinge_lines, key_time,
-                         part_normal, part_points, score_at, state_candidates)
+                         moved_with, part_normal, part_points, score_at, state_candidates)
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot, unshaded
 from .plausible import HIDDEN_SHARE, little_motion, off_part
@@ -182,19 +182,10 @@ def merge_target(run, k: int, loss: float) -> int | None:
     rest of an existing one (Gaussians its box missed) is merged into it. None if none."""
     model = run.model
     best = None
-    hard = model.hard.clone()
-    members = torch.as_tensor(model.labels() == k + 1, device=hard.device)
     for j in range(model.k):
         if j == k or model.types[j] != model.types[k]:
             continue
-        h = hard.clone()
-        h[members] = j + 1
-        model.hard = h
-        states = model.states.clone()
-        model.states = states.clone()
-        model.states[k] = 0.0
-        merged = float(run.evaluate().mean())
-        model.states, model.hard = states, hard
+        merged = float(moved_with(run, k, j).mean())
         if merged <= loss * (1 + REMOVE_TOL) and (best is None or merged < best[0]):
             best = (merged, j)
     return None if best is None else best[1]
