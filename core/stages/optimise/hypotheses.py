@@ -636,11 +636,13 @@ def remove_spurious(run, locked: list[bool], join: bool = False) -> list[str]:
     removed = []
     while True:
         weakest = None      # (gain, k, what failed, its loss, the loss moving, outcome)
+        with unshaded(model):
+            here = run.evaluate()       # the model as it is, the same for every joint
         for k in range(model.k):
             if locked[k]:
                 continue
             ids = moving_frames(model, frames, k)
-            here, alts = alternatives(run, k, join)
+            alts = alternatives(run, k, join)
             sel = ids or list(range(len(here)))
             failed = [a for a in alts if not clearly_better(a[1], here, ids)]
             if not failed:
@@ -669,21 +671,26 @@ def remove_spurious(run, locked: list[bool], join: bool = False) -> list[str]:
                         0.0, free=[i == j for i in range(model.k)], lr_scale=0.3)
 
 
-def alternatives(run, k: int, join: bool) -> tuple[np.ndarray, list[tuple]]:
-    """Per-frame image losses (unshaded) of the model as it is, and of what else could explain
-    joint ``k``'s part: ``(what, losses, label)`` with ``label`` the part its Gaussians would
-    join as that outcome (0 = the base; None: no outcome, only evidence). At rest and gone
-    (:func:`without_motion`) and, with ``join``, moving with each other joint."""
-    here, rest, gone = without_motion(run, k)
-    alts = [("at rest", rest, 0), ("gone", gone, None)]
-    if not join:
-        return here, alts
+def alternatives(run, k: int, join: bool) -> list[tuple]:
+    """What else could explain joint ``k``'s part: ``(what, per-frame image losses (unshaded),
+    label)`` with ``label`` the part its Gaussians would join as that outcome (0 = the base;
+    None: no outcome, only evidence). At rest (state 0 at every time), gone
+    (:func:`.model.vanished`) and, with ``join``, moving with each other joint."""
     model = run.model
-    for j in range(model.k):
-        if j != k:
-            with unshaded(model):
-                alts.append((f"moving with {model.names[j]}", moved_with(run, k, j), j + 1))
-    return here, alts
+    with unshaded(model):
+        snap = snapshot(model)
+        with torch.no_grad():
+            model.states = model.states.clone()
+            model.states[k] = 0.0
+        rest = run.evaluate()
+        restore(model, snap)
+        with vanished(model, k):
+            gone = run.evaluate()
+        alts = [("at rest", rest, 0), ("gone", gone, None)]
+        if join:
+            alts += [(f"moving with {model.names[j]}", moved_with(run, k, j), j + 1)
+                     for j in range(model.k) if j != k]
+    return alts
 
 
 @torch.no_grad()
@@ -699,22 +706,6 @@ def moved_with(run, k: int, j: int) -> np.ndarray:
         return run.evaluate()
     finally:
         model.hard = hard
-
-
-def without_motion(run, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-frame image losses (unshaded) of the model as it is, with joint ``k``'s part at rest
-    (state 0 at every time) and with its part gone (:func:`.model.vanished`)."""
-    model = run.model
-    with unshaded(model):
-        here = run.evaluate()
-        snap = snapshot(model)
-        with torch.no_grad():
-            model.states = model.states.clone()
-            model.states[k] = 0.0
-        rest = run.evaluate()
-        restore(model, snap)
-        with vanished(model, k):
-            return here, rest, run.evaluate()
 
 
 #: Joints fitted this close are one joint (axes within the angle, lines within the share of

@@ -248,17 +248,13 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         refine(run, n // 2, share=0.07)
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
         again += missed.drop_into_body(run, [a for a in added if a not in again])
-        removed += [name for name in again if name not in added]
-        rejected = [name for name in added if name in again]
-        added = [name for name in added if name not in again]
+        sort_out(again, added, removed, rejected)
     if options.parts and model.k:   # ... and once more, fitted with their final parts
         merged += hypotheses.merge_duplicates(run, fixed())
         # each joint against the others after the last fits: a piece their joint explains
         # as well joins it, a motion no better than rest or gone is dropped
-        late = hypotheses.remove_spurious(run, locked=model.locked.tolist(), join=True)
-        removed += [name for name in late if name not in added]
-        rejected += [name for name in late if name in added]
-        added = [name for name in added if name not in late]
+        sort_out(hypotheses.remove_spurious(run, locked=model.locked.tolist(), join=True),
+                 added, removed, rejected)
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
     losses = run.evaluate()
@@ -285,6 +281,15 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     write_labels(out / layout.PART_LABELS, model.labels())
     write_articulation(out / layout.ARTICULATION, articulation)
     return figures
+
+
+def sort_out(dropped: list[str], added: list[str], removed: list[str],
+             rejected: list[str]) -> None:
+    """Joints ``dropped`` by a test: those the optimisation invented (``added``) leave it for
+    ``rejected``, the others go to ``removed`` (the lists are changed in place)."""
+    removed += [name for name in dropped if name not in added]
+    rejected += [name for name in dropped if name in added]
+    added[:] = [name for name in added if name not in dropped]
 
 
 def refine(run: Runner, n: int, share: float) -> None:
