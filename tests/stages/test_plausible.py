@@ -13,7 +13,8 @@ from artgs.core.model.capture import Frame, load_capture
 from artgs.core.model.cameras import Camera, intrinsics, look_at
 from artgs.core.model.joints import Joint, read_articulation, rotation_about_axis
 from artgs.core.model.regime import regime
-from artgs.core.stages.optimise.hypotheses import PROBE_SPREAD_DEG, distinct, probed
+from artgs.core.stages.optimise.hypotheses import (PROBE_SPREAD_DEG, box_edges, distinct,
+                                                face_edges, probed)
 from artgs.core.stages.optimise.plausible import HIDDEN_SHARE, into_body, open_space
 from artgs.core.stages.optimise.stage import handle_holds, object_size
 from artgs.core.stages.reconstruct import initial_splats
@@ -107,3 +108,20 @@ def test_probes_are_distinct_starts() -> None:
     assert [h[0] for h in probed(ranked, "prismatic", 1.0)] == [0.1, 0.2, 0.3]
     one = [(0.1, z, o), (0.2, near, o), (0.25, -z, o), (0.3, far, o), (0.4, x, o)]
     assert [h[0] for h in probed(one, "prismatic", 1.0)] == [0.1, 0.2, 0.25, 0.3]
+
+
+def test_a_piece_of_a_door_gets_the_hinge_of_its_face() -> None:
+    """The free-edge half of a door (the part the frames show moving most) has its own box edges
+    through the door's middle; the edges of the face it lies in include the true hinge."""
+    rng = np.random.default_rng(0)
+    face = np.c_[rng.normal(0, 0.002, 4000), rng.uniform(0, 0.6, 4000), rng.uniform(0, 1, 4000)]
+    body = np.c_[rng.uniform(-0.5, -0.05, 3000), rng.uniform(0, 0.6, 3000),
+                 rng.uniform(0, 1, 3000)]
+    piece = face[face[:, 1] > 0.35]
+    axes = np.eye(3)
+    hinge_z = [np.cross(d, p - [0.0, 0.0, 0.0]) for d, p in
+               face_edges(np.r_[face, body], piece, axes, 0.01) if abs(d[2]) > 0.99]
+    # lines along z through (0, 0): the distance of the origin from the line is |d x p|
+    assert min(np.linalg.norm(c) for c in hinge_z) < 0.02
+    own = [np.linalg.norm(np.cross(d, p)) for d, p in box_edges(piece, axes) if abs(d[2]) > 0.99]
+    assert min(own) > 0.3

@@ -150,10 +150,39 @@ def hinge_lines(model: ArticulatedSplat, pts: np.ndarray) -> list[tuple[np.ndarr
     """Candidate hinges of a part: the edges of its box along its own principal axes, and
     along the object's (a round or square part, a washing machine's porthole door, has no
     principal axes of its own: its box turns at random in its plane, while hinges run along
-    the body's edges)."""
+    the body's edges), and the edges of the object's face the part lies in
+    (:func:`face_edges`)."""
     means = model.splat.means.cpu().numpy().astype(float)
     body = np.linalg.svd(means - means.mean(0), full_matrices=False)[2]
-    return box_edges(pts) + box_edges(pts, body)
+    return box_edges(pts) + box_edges(pts, body) + face_edges(means, pts, body,
+                                                              0.01 * model.size)
+
+
+def face_edges(means: np.ndarray, pts: np.ndarray, axes: np.ndarray, tol: float
+               ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Hinges of a part that is a piece of a panel: the 4 edges, in the part's plane, of the
+    face of the object that the part lies in (the object's Gaussians within the part's
+    thickness plus ``tol`` of its mid-plane, 2-98 % percentiles), in the frame ``axes`` (3,3),
+    the part's thinnest axis of them its normal. The motion route often gives the part of a
+    door that moved most (its free edge): its own box edges run through the door's middle,
+    while its hinge lies on the edge of the face it belongs to."""
+    c = pts.mean(0)
+    local = (pts - c) @ axes.T
+    lo, hi = np.percentile(local, 2, axis=0), np.percentile(local, 98, axis=0)
+    thin = int(np.argmin(hi - lo))
+    mid = 0.5 * (lo + hi)
+    body = (means - c) @ axes.T
+    face = body[np.abs(body[:, thin] - mid[thin]) <= 0.5 * (hi - lo)[thin] + tol]
+    if len(face) < 10:
+        return []
+    flo, fhi = np.percentile(face, 2, axis=0), np.percentile(face, 98, axis=0)
+    a, b = [i for i in range(3) if i != thin]
+    lines = []
+    for along, across in ((a, b), (b, a)):
+        for s in (flo[across], fhi[across]):
+            p = c + mid[thin] * axes[thin] + s * axes[across] + mid[along] * axes[along]
+            lines.append((axes[along].copy(), p))
+    return lines
 
 def revolute_from_motion(pts: np.ndarray, posed: np.ndarray, axis: np.ndarray, point: np.ndarray
                          ) -> tuple[np.ndarray, float]:
@@ -184,7 +213,7 @@ def hypotheses_of(model: ArticulatedSplat, k: int, kind: str, members: np.ndarra
     values), the part's mean surface normal (drawers slide along their front's normal), the
     part box's and the object box's axes. Revolute: every edge of the part's box as a hinge
     (:func:`hinge_lines`), with the per-time angles that best reproduce the fitted part
-    positions.
+    positions (28 lines: :func:`select_types` takes them all).
     """
     pts = part_points(model, k, members=members)
     if len(pts) < 10:
@@ -338,7 +367,7 @@ def key_time(run, k: int, changed: np.ndarray | None = None) -> int:
         per_time[changed < 0.5 * np.max(changed)] = -np.inf
     return int(np.argmax(per_time))
 
-def select_types(run, share: float, fixed: list[bool], tries: int = 24
+def select_types(run, share: float, fixed: list[bool], tries: int = 28
                  ) -> dict[str, dict[str, Any]]:
     """Keep, per joint, the type and line whose fit explains the frames where it moves best.
 
