@@ -119,9 +119,9 @@ def test_a_piece_of_a_door_gets_the_hinge_of_its_face() -> None:
                  rng.uniform(0, 1, 3000)]
     piece = face[face[:, 1] > 0.35]
     axes = np.eye(3)
-    hinge_z = [np.cross(d, p - [0.0, 0.0, 0.0]) for d, p in
-               face_edges(np.r_[face, body], piece, axes, 0.01) if abs(d[2]) > 0.99]
-    # lines along z through (0, 0): the distance of the origin from the line is |d x p|
-    assert min(np.linalg.norm(c) for c in hinge_z) < 0.02
+    # a line (d, p) along z passes |d x p| from the true hinge, the z axis
+    hinges = [np.linalg.norm(np.cross(d, p)) for d, p in
+              face_edges(np.r_[face, body], piece, axes, 0.01) if abs(d[2]) > 0.99]
+    assert min(hinges) < 0.02
     own = [np.linalg.norm(np.cross(d, p)) for d, p in box_edges(piece, axes) if abs(d[2]) > 0.99]
     assert min(own) > 0.3

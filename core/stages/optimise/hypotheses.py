@@ -213,7 +213,7 @@ def hypotheses_of(model: ArticulatedSplat, k: int, kind: str, members: np.ndarra
     values), the part's mean surface normal (drawers slide along their front's normal), the
     part box's and the object box's axes. Revolute: every edge of the part's box as a hinge
     (:func:`hinge_lines`), with the per-time angles that best reproduce the fitted part
-    positions (28 lines: :func:`select_types` takes them all).
+    positions.
     """
     pts = part_points(model, k, members=members)
     if len(pts) < 10:
@@ -367,8 +367,7 @@ def key_time(run, k: int, changed: np.ndarray | None = None) -> int:
         per_time[changed < 0.5 * np.max(changed)] = -np.inf
     return int(np.argmax(per_time))
 
-def select_types(run, share: float, fixed: list[bool], tries: int = 28
-                 ) -> dict[str, dict[str, Any]]:
+def select_types(run, share: float, fixed: list[bool]) -> dict[str, dict[str, Any]]:
     """Keep, per joint, the type and line whose fit explains the frames where it moves best.
 
     ``fixed`` joints (trusted user joints, locked joints) keep their type and line. The joint's
@@ -409,7 +408,7 @@ def select_types(run, share: float, fixed: list[bool], tries: int = 28
         other = PRISMATIC if own == REVOLUTE else REVOLUTE
         core = seen_moving(model, frames, cfg, k)
         given = tool_hypotheses(model, frames, k) + run.alternatives.get(name, [])
-        hyps = {t: [h for h in given if h[0] == t] + hypotheses_of(model, k, t, core)[:tries]
+        hyps = {t: [h for h in given if h[0] == t] + hypotheses_of(model, k, t, core)
                 for t in (own, other)}
         if not ids or not hyps[other]:
             run.done += share / len(todo)
