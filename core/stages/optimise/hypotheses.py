@@ -23,7 +23,7 @@ from ...geometry.rigid import JointFit, fit_both, kabsch
 from .fit import part_level, score_level, search_states, skip_draws
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot, unshaded, vanished
-from .plausible import HIDDEN_SHARE, into_body
+from .plausible import HIDDEN_SHARE, box_span, into_body
 from .seen import seen_moving
 
 #: Relative loss increase below which a part's removal is taken (float noise of the evaluation).
@@ -131,12 +131,11 @@ def part_normal(model: ArticulatedSplat, k: int) -> np.ndarray:
 
 def box_edges(pts: np.ndarray, axes: np.ndarray | None = None
               ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The 12 edges of the part's box (2–98 % percentiles) as (direction, point) lines: along
+    """The 12 edges of the part's box (:func:`box_span`) as (direction, point) lines: along
     the part's principal axes, or the rows of ``axes`` (3,3)."""
     c = pts.mean(0)
     vt = np.linalg.svd(pts - c, full_matrices=False)[2] if axes is None else axes
-    local = (pts - c) @ vt.T
-    lo, hi = np.percentile(local, 2, axis=0), np.percentile(local, 98, axis=0)
+    lo, hi = box_span((pts - c) @ vt.T)
     lines = []
     for a in range(3):
         b, d = [i for i in range(3) if i != a]
@@ -162,20 +161,19 @@ def face_edges(means: np.ndarray, pts: np.ndarray, axes: np.ndarray, tol: float
                ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Hinges of a part that is a piece of a panel: the 4 edges, in the part's plane, of the
     face of the object that the part lies in (the object's Gaussians within the part's
-    thickness plus ``tol`` of its mid-plane, 2-98 % percentiles), in the frame ``axes`` (3,3),
+    thickness plus ``tol`` of its mid-plane, :func:`box_span`), in the frame ``axes`` (3,3),
     the part's thinnest axis of them its normal. The motion route often gives the part of a
     door that moved most (its free edge): its own box edges run through the door's middle,
     while its hinge lies on the edge of the face it belongs to."""
     c = pts.mean(0)
-    local = (pts - c) @ axes.T
-    lo, hi = np.percentile(local, 2, axis=0), np.percentile(local, 98, axis=0)
+    lo, hi = box_span((pts - c) @ axes.T)
     thin = int(np.argmin(hi - lo))
     mid = 0.5 * (lo + hi)
     body = (means - c) @ axes.T
     face = body[np.abs(body[:, thin] - mid[thin]) <= 0.5 * (hi - lo)[thin] + tol]
     if len(face) < 10:
         return []
-    flo, fhi = np.percentile(face, 2, axis=0), np.percentile(face, 98, axis=0)
+    flo, fhi = box_span(face)
     a, b = [i for i in range(3) if i != thin]
     lines = []
     for along, across in ((a, b), (b, a)):

@@ -55,13 +55,21 @@ def line_distances(points: np.ndarray, axis: np.ndarray, origin: np.ndarray) -> 
     return np.linalg.norm(d - np.outer(d @ a, a), axis=1)
 
 
+def box_span(local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per column of ``local`` (M,3), the box's low and high sides: the 2 and 98 % percentiles,
+    so that a few stray Gaussians do not stretch it."""
+    return np.percentile(local, 2, axis=0), np.percentile(local, 98, axis=0)
+
+
 def part_size(points: np.ndarray) -> float:
-    """Diagonal (m) of a part's 2–98 % box along its principal axes; 0 for under 3 points."""
+    """Diagonal (m) of a part's box (:func:`box_span`) along its principal axes; 0 for under 3
+    points."""
     if len(points) < 3:
         return 0.0
     c = np.asarray(points, float) - np.mean(points, 0)
     q = c @ np.linalg.svd(c, full_matrices=False)[2].T
-    return float(np.linalg.norm(np.percentile(q, 98, 0) - np.percentile(q, 2, 0)))
+    lo, hi = box_span(q)
+    return float(np.linalg.norm(hi - lo))
 
 
 #: distance from a hinge's line to its part, as a share of the part's size, beyond which the
