@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from ....geometry import lift
+from ....geometry.rectangle import smallest_rectangle
 from . import prompts
 from ....model.cameras import Camera, intrinsics, look_at
 from ....model.capture import Capture
@@ -230,16 +231,7 @@ def footprint(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Minimum-area rectangle of the points seen from above (along -z; 1-99 percentiles, 1 degree
     steps): its angle (radians, of its first side), the centre and half sizes of the box it
     bounds."""
-    xy = points[:, :2]
-    best = None
-    for a in np.radians(np.arange(0.0, 90.0, 1.0)):
-        c, s = math.cos(a), math.sin(a)
-        local = xy @ np.array([[c, -s], [s, c]])
-        lo, hi = np.percentile(local, [1, 99], axis=0)
-        area = float(np.prod(hi - lo))
-        if best is None or area < best[0]:
-            best = (area, a, lo, hi)
-    _, a, lo, hi = best
+    a, lo, hi = smallest_rectangle(points[:, :2])
     c, s = math.cos(a), math.sin(a)
     mid = np.array([[c, -s], [s, c]]) @ ((lo + hi) / 2)
     zlo, zhi = np.percentile(points[:, 2], [1, 99])
