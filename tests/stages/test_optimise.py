@@ -639,6 +639,36 @@ def test_the_last_test_gives_a_piece_to_the_joint_that_moves_it(cabinet):
     assert np.array_equal(labels[before < 3], before[before < 3])
 
 
+def test_the_only_joint_is_kept_with_a_warning(cabinet):
+    """A proposal on a piece of the body that never moves is removed beside the true joints;
+    alone, it is kept (an interaction capture shows something moving, and the joint that
+    explains it best is a better start than none) and reported as weak evidence."""
+    from artgs.core.stages.optimise.hypotheses import remove_spurious
+    from artgs.core.stages.optimise.stage import export
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json")
+    means = initial_splats(capture.static)[0].means
+    centres = np.array([j.extent["center"] for j in gt.joints])
+    far = means[np.argmax(np.linalg.norm(means[:, None] - centres[None], axis=-1).min(1))]
+    ghost = copy.deepcopy(gt.joints[0])
+    ghost.name, ghost.child = "ghost", "ghost_link"
+    ghost.extent = {"center": list(map(float, far)), "axes": np.eye(3).tolist(),
+                    "half_size": [0.12, 0.12, 0.12]}
+    ghost.states = {t: 0.5 * v for t, v in ghost.states.items()}
+    options = OptimiseOptions(iterations=20)
+    _, run = _runner(capture, gt.joints + [ghost], gt.joints + [ghost], options)
+    assert remove_spurious(run, [False] * 3) == ["ghost"]
+    assert run.weak == set()
+    _, run = _runner(capture, [ghost], [ghost], options)
+    assert remove_spurious(run, [False]) == []
+    assert run.model.names == ["ghost"] and run.weak == {"ghost"}
+    joint, = export(run.model, run.frames, [ghost], run.evaluate(), {"ghost": {"weak": True}},
+                    run.cfg, None)
+    assert any("kept as the only joint" in w for w in joint.extra["warnings"])
+    assert joint.confidence < 0.5
+
+
 def test_same_joint_needs_alike_axes_lines_and_states():
     """Joints are candidates for one only when type, axis, line and states agree."""
     from artgs.core.stages.optimise.hypotheses import same_joint

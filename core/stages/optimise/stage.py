@@ -106,6 +106,8 @@ class Runner:
         #: the helper process (core/stages/optimise/parallel.py)
         self.helper = None
         self.processes = 1     # 2 once the helper worked
+        #: joints the last spurious-part test kept only as the only joint (hypotheses.remove_spurious)
+        self.weak: set[str] = set()
 
     def run_fit(self, steps: int, phase: str, share: float, **kw: Any) -> float:
         """A fit that reports progress for ``share`` of the stage."""
@@ -258,6 +260,8 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
     depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
     losses = run.evaluate()
+    for name in run.weak & set(model.names):
+        evidence.setdefault(name, {})["weak"] = True
     result = export(model, frames, joints, losses, evidence, cfg, space, depth)
     if not result:
         raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
@@ -363,6 +367,9 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             warnings.append("little motion seen")
         if len(pts) < 50:
             warnings.append("part has few Gaussians")
+        if ev.get("weak"):
+            warnings.append("the frames do not clearly show it moving (kept as the only joint): "
+                            "check it, or remove it (Bones panel: Remove Joint)")
         inside = into_body(space, kind, axis, origin, values, pts)
         if inside > HIDDEN_SHARE:
             warnings.append(f"opens into the body ({100 * inside:.0f} % of its surface goes "
