@@ -466,8 +466,9 @@ def test_hinge_across_the_door_restarts(cabinet, tmp_path):
     assert s.axis_error_deg < 3.0 and s.origin_error_cm < 3.0, (s, figures)
 
 
-def test_spurious_part_removed(cabinet, tmp_path):
-    """A proposal on a piece of the body that never moves is dropped; the real ones stay."""
+def _ghost(cabinet: Path):
+    """A proposal on a piece of the body that never moves: the first true joint's line with half
+    its states, its box round the Gaussian farthest from every true part."""
     gt = read_articulation(cabinet / "gt.json")
     means = initial_splats(load_capture(cabinet).static)[0].means
     centres = np.array([j.extent["center"] for j in gt.joints])
@@ -477,7 +478,13 @@ def test_spurious_part_removed(cabinet, tmp_path):
     fake.extent = {"center": list(map(float, far)), "axes": np.eye(3).tolist(),
                    "half_size": [0.12, 0.12, 0.12]}
     fake.states = {t: 0.5 * v for t, v in fake.states.items()}
-    out = _out(tmp_path, cabinet, list(gt.joints) + [fake])
+    return fake
+
+
+def test_spurious_part_removed(cabinet, tmp_path):
+    """A proposal on a piece of the body that never moves is dropped; the real ones stay."""
+    gt = read_articulation(cabinet / "gt.json")
+    out = _out(tmp_path, cabinet, list(gt.joints) + [_ghost(cabinet)])
     figures = optimise(out, load_capture(cabinet), QUIET,
                        OptimiseOptions(iterations=60, types=False, parts=True))
     names = [j.name for j in read_articulation(out / layout.ARTICULATION).joints]
@@ -648,14 +655,7 @@ def test_the_only_joint_is_kept_with_a_warning(cabinet):
 
     capture = load_capture(cabinet)
     gt = read_articulation(cabinet / "gt.json")
-    means = initial_splats(capture.static)[0].means
-    centres = np.array([j.extent["center"] for j in gt.joints])
-    far = means[np.argmax(np.linalg.norm(means[:, None] - centres[None], axis=-1).min(1))]
-    ghost = copy.deepcopy(gt.joints[0])
-    ghost.name, ghost.child = "ghost", "ghost_link"
-    ghost.extent = {"center": list(map(float, far)), "axes": np.eye(3).tolist(),
-                    "half_size": [0.12, 0.12, 0.12]}
-    ghost.states = {t: 0.5 * v for t, v in ghost.states.items()}
+    ghost = _ghost(cabinet)
     options = OptimiseOptions(iterations=20)
     _, run = _runner(capture, gt.joints + [ghost], gt.joints + [ghost], options)
     assert remove_spurious(run, [False] * 3) == ["ghost"]
