@@ -65,6 +65,9 @@ def _optimise(entry: dict, out: Path) -> list[str]:
             residual = _number(joint.extra.get("residual"), ", residual {:.4g}") or ""
             confidence = "" if joint.confidence is None else f", confidence {joint.confidence:.2f}"
             lines.append(f"{joint.name}: {joint.type}{residual}{confidence}")
+            warnings = joint.extra.get("warnings")
+            if isinstance(warnings, list):     # the evidence is weak: say why, under the joint
+                lines += [f"  {joint.name}: {w}" for w in warnings if isinstance(w, str)]
     return lines
 
 

@@ -443,7 +443,9 @@ def test_stage_panels_show_the_last_runs_key_figures(tmp_path):
     layout.update_report(tmp_path, "optimise", loss=0.0123, joints=1)
     write_articulation(tmp_path / "articulation.json", Articulation([
         Joint("door", "revolute", [0, 0, 1], [0.1, 0, 0], (0, 1.5), confidence=0.9,
-              extra={"residual": 0.0111})]))
+              extra={"residual": 0.0111}),
+        Joint("lid", "revolute", [1, 0, 0], [0, 0, 0.5], (0, 0.2), confidence=0.3,
+              extra={"warnings": ["little motion seen"]})]))
     layout.update_report(tmp_path, "export", links={
         "base": {"faces": 1200, "collision_hulls": 3, "mass_kg": 12.345}},
         validation={"fk": {"ok": True}, "collision": {"ok": False}, "ok": False})
@@ -451,7 +453,8 @@ def test_stage_panels_show_the_last_runs_key_figures(tmp_path):
         "door": {"success": True}, "drawer": {"success": False, "reason": "slipped"}})
     os.utime(tmp_path / "report.json", (later + 5, later + 5))
     assert key_figures(tmp_path, "optimise")[1:] == [
-        "residual (mean loss) 0.0123", "door: revolute, residual 0.0111, confidence 0.90"]
+        "residual (mean loss) 0.0123", "door: revolute, residual 0.0111, confidence 0.90",
+        "lid: revolute, confidence 0.30", "  lid: little motion seen"]
     assert key_figures(tmp_path, "export")[1:] == [
         "1 links; fk ok, collision FAILED", "base: 1200 faces, 3 hulls, 12.35 kg"]
     assert key_figures(tmp_path, "check")[1:] == [
