@@ -65,8 +65,9 @@ def robot_keys(plan: RobotPlan) -> dict:
 
 
 def grasps(spec: ObjectSpec, schedule: list[dict[str, float]]) -> list[np.ndarray]:
-    """Per time, the 4x4 grasp frame (world): origin at the held handle's centre, z = approach
-    (into the part), y = across the handle bar (the fingers close along it)."""
+    """Per time, the 4x4 grasp frame (world): origin at the held part's grasp point (its
+    ``handle``, as gt.json's; else its last box's centre), z = approach (into the part), y =
+    across the handle bar (the fingers close along it)."""
     R, t = spec.base_pose[:3, :3], spec.base_pose[:3, 3]
     joints = {q.name: j for q, j in zip(spec.parts, spec.joints())}
     held = _held_parts(spec, schedule)
@@ -75,10 +76,13 @@ def grasps(spec: ObjectSpec, schedule: list[dict[str, float]]) -> list[np.ndarra
         q = next(q for q in spec.parts if q.name == name)
         j = joints[name]
         handle = q.boxes[-1]
+        centre = np.array(handle.center) if q.handle is None else np.asarray(q.handle, float)
         M = joint_transform(j.type, j.axis, j.origin, state[name])
-        point = M[:3, :3] @ (R @ (np.array(handle.center) + q.origin) + t) + M[:3, 3]
+        point = M[:3, :3] @ (R @ (centre + q.origin) + t) + M[:3, 3]
         approach = M[:3, :3] @ -R[:, 0]
-        bar = M[:3, :3] @ R[:, int(np.argmax(handle.half))]
+        # the bar: the handle's longest side across the approach (a knob deeper than it is
+        # wide has its longest side along the approach, which would leave no grasp frame)
+        bar = M[:3, :3] @ R[:, 1 + int(np.argmax(np.asarray(handle.half)[1:]))]
         y = np.cross(approach, bar)
         y /= np.linalg.norm(y)
         G = np.eye(4)

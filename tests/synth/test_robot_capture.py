@@ -15,7 +15,10 @@ from artgs.core.model.joints import joint_transform, read_articulation
 from artgs.core.stages.propose.motion.route import propose_motion
 from artgs.core.stages.reconstruct import initial_splats
 from artgs.core.stages.robot_twin import robot_twin, twin_depth_for_capture
+from artgs.core.synth.builder import HANDLES
 from artgs.core.synth.generate import generate_object
+from artgs.core.synth.layouts import random_spec
+from artgs.core.synth.robot import grasps
 
 SIZE = {"width": 96, "height": 72, "static_views": 12, "steps": 6}
 
@@ -169,3 +172,28 @@ def test_tool_path_gives_the_hinge(capture_dir):
     runs = tool_segments(np.concatenate([door, slide]), 0.01, 0.02)
     assert [r.tolist() for r in runs] == [list(range(len(door))),
                                           list(range(len(door), len(door) + 5))]
+
+
+@pytest.mark.parametrize("kind", HANDLES)
+def test_grasp_frames_for_every_handle(kind, monkeypatch):
+    """Every handle kind (a knob is deeper than it is wide; a grip recess has no box) gives
+    orthonormal grasp frames at the point gt.json names as the handle."""
+    import artgs.core.synth.builder as builder
+    real_init = builder.Builder.__init__
+
+    def init(self, *a, **k):
+        real_init(self, *a, **k)
+        self.handle_kind = kind
+    monkeypatch.setattr(builder.Builder, "__init__", init)
+    for category in ("cabinet", "washing_machine", "drawer"):
+        spec = random_spec(category, 11, variety=True)
+        joints = spec.joints()
+        spec.annotate(joints)
+        schedule = [{q.name: 0.0 for q in spec.parts}] + \
+            [{q.name: (0.5 if i == 0 else 0.0) * q.limit[1] for i, q in enumerate(spec.parts)}]
+        for G, state in zip(grasps(spec, schedule), schedule):
+            assert np.allclose(G[:3, :3].T @ G[:3, :3], np.eye(3), atol=1e-9)
+            j = joints[0]
+            M = joint_transform(j.type, j.axis, j.origin, state[spec.parts[0].name])
+            handle = M[:3, :3] @ np.asarray(j.handle["point"]) + M[:3, 3]
+            assert np.linalg.norm(G[:3, 3] - handle) < 1e-9
