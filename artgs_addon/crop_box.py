@@ -9,7 +9,7 @@ from pathlib import Path
 
 import bpy
 import numpy as np
-from mathutils import Vector
+from mathutils import Matrix, Vector
 
 from ..core.model import layout
 from ..core.model.crop import CropBox, crop_from_matrix, read_crop, write_crop
@@ -24,16 +24,24 @@ def find_crop_box(scene: bpy.types.Scene) -> bpy.types.Object | None:
 
 
 def add_crop_box(context: bpy.types.Context) -> bpy.types.Object:
-    """The scene's crop box (made if absent): around the splat preview's bounds (+10 %) when
-    there is one, else a 1 m cube at the 3D cursor."""
+    """The scene's crop box (made if absent): OUT's crop.json when there is one (e.g. the box
+    reconstruct separated from the room), else around the splat preview's bounds (+10 %), else a
+    1 m cube at the 3D cursor."""
     obj = find_crop_box(context.scene)
     if obj is None:
         obj = bpy.data.objects.new(CROP_BOX, None)
         obj.empty_display_type = "CUBE"
         obj.empty_display_size = 1.0
         context.scene.collection.objects.link(obj)
+        out = context.scene.artgs.output_path
+        current = read_crop(out) if out is not None else None
         splat = context.scene.artgs.splat_object
-        if splat is not None and splat.bound_box:
+        if current is not None:
+            M = np.eye(4)
+            M[:3, :3] = current.axes.T * current.half_size
+            M[:3, 3] = current.center
+            obj.matrix_world = Matrix(M.tolist())
+        elif splat is not None and splat.bound_box:
             corners = np.array([splat.matrix_world @ Vector(c)
                                 for c in splat.bound_box])
             lo, hi = corners.min(0), corners.max(0)

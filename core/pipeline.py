@@ -15,7 +15,9 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from .geometry.crop_capture import crop_capture
 from .model import layout, registry
+from .model.crop import read_crop
 from .model.capture import Capture, load_capture, resolution_note
 from .model.errors import NothingFound
 from .model.outdir import claim_out
@@ -75,6 +77,7 @@ def _run_stage(spec: StageSpec, out: Path, options: Any, progress: Progress,
         loaded = capture if isinstance(capture, Capture) else \
             load_capture(layout.capture_of(out, capture), max_side=_max_side(options))
         _log_resolution(loaded, progress)
+        loaded = crop_capture(loaded, read_crop(out))
     check_stage(spec, loaded, options)
     progress.start(spec.name, spec.title.lower())
     figures = resolve(spec.run)(out, loaded, options, progress)

@@ -14,6 +14,7 @@ from typing import Any, ClassVar
 import bpy
 
 from ..artgs_addon import preferences
+from ..artgs_addon.crop_box import sync_crop
 from ..artgs_addon.properties import ArtgsStageState
 from ..artgs_addon.worker import Worker, WorkerResult
 from ..core.model import protocol
@@ -111,6 +112,9 @@ class WorkerOperator:
         state = self._state(context)
         self._before = state.snapshot()
         self._figures: dict[str, Any] = {}
+        out = context.scene.artgs.output_path
+        if out is not None:
+            sync_crop(context.scene, out)       # the crop box -> OUT/crop.json: every stage reads it
         reason = self.prepare(context)
         if reason is None:
             self._worker = Worker(preferences.engine_python(context), self.command,

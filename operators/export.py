@@ -10,7 +10,7 @@ from bpy.props import EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from ..artgs_addon.armature import find_armature
-from ..artgs_addon.crop_box import add_crop_box, sync_crop
+from ..artgs_addon.crop_box import add_crop_box
 from ..artgs_addon.urdf_import import URDF_KEY, import_urdf, write_edited_urdf
 from ..artgs_addon.worker import WorkerResult
 from ..core.model import layout
@@ -47,7 +47,6 @@ class ARTGS_OT_export_urdf(WorkerOperator, bpy.types.Operator):
 
     def worker_args(self, context: bpy.types.Context) -> list[str]:
         settings = context.scene.artgs
-        sync_crop(context.scene, settings.output_path)          # the crop box -> OUT/crop.json
         args = [str(settings.output_path), "--face-budget", str(self.face_budget)]
         if settings.capture_path is not None and (settings.capture_path / "transforms.json").is_file():
             args += ["--capture", str(settings.capture_path)]
@@ -128,7 +127,8 @@ class ARTGS_OT_show_check_frames(bpy.types.Operator):
 
 class ARTGS_OT_add_crop_box(bpy.types.Operator):
     """Add (or select) the crop box: an Empty shown as a cube; place and scale it around the
-    object. Export keeps only what lies inside (written to OUT/crop.json when a stage runs)"""
+    object (closed). Every stage keeps only what lies inside (written to OUT/crop.json when a
+    stage runs); starts from OUT's crop.json when there is one (the separation's)"""
 
     bl_idname = "artgs.add_crop_box"
     bl_label = "Add Crop Box"

@@ -36,9 +36,19 @@ class Separation:
 
 
 def camera_up(c2ws: np.ndarray) -> np.ndarray:
-    """World up from camera poses (N,4,4, OpenGL axes: +y is the image's up)."""
-    up = np.asarray(c2ws, float)[:, :3, 1].sum(0)
-    return up / np.linalg.norm(up)
+    """World up from camera poses (N,4,4, OpenGL axes: +y is the image's up). Cameras are held
+    level (no roll) but tilted up or down, so up is the direction perpendicular to all their x
+    axes (least squares), signed by their mean y; the mean y alone leans toward the object when
+    the cameras look down at it from one side. With fewer than two distinct x axes, the mean y."""
+    c2ws = np.asarray(c2ws, float)
+    mean_y = c2ws[:, :3, 1].sum(0)
+    mean_y /= np.linalg.norm(mean_y)
+    x = c2ws[:, :3, 0]
+    _, sv, vt = np.linalg.svd(x, full_matrices=False)
+    if len(x) < 2 or sv[1] < 0.1 * sv[0]:
+        return mean_y
+    up = vt[2]
+    return up if up @ mean_y > 0 else -up
 
 
 def focus_point(c2ws: np.ndarray) -> np.ndarray:
@@ -87,8 +97,12 @@ def ransac_plane(points: np.ndarray, normal_ok, tol: float, iterations: int = 40
 
 def separate_object(points: np.ndarray, c2ws: np.ndarray, interaction_c2ws: np.ndarray,
                     boxes: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = (),
-                    voxel: float = 0.02, tol: float | None = None) -> Separation:
-    """Object mask over ``points`` (N,3); ``boxes`` = moving parts' (centre, axes rows, half)."""
+                    voxel: float = 0.02, tol: float | None = None, band: float = 1.0
+                    ) -> Separation:
+    """Object mask over ``points`` (N,3); ``boxes`` = moving parts' (centre, axes rows, half).
+    The floor and walls are found with ``tol``; ``band`` x ``tol`` on either side of a wall goes
+    too (raw depth, noisier than a splat, scatters a far wall's points beyond ``tol``); the floor
+    takes its own noise into account (:func:`_plane_band`)."""
     points = np.asarray(points, float)
     up = camera_up(np.concatenate([c2ws, interaction_c2ws]) if len(interaction_c2ws) else c2ws)
     scale = float(np.linalg.norm(np.percentile(points, 95, 0) - np.percentile(points, 5, 0)))
@@ -106,7 +120,8 @@ def separate_object(points: np.ndarray, c2ws: np.ndarray, interaction_c2ws: np.n
         n, d, _ = floor
         if n @ up < 0:
             n, d = -n, -d
-        gone = points @ n - d < tol
+        d, spread = _plane_band(points @ n, d, tol)
+        gone = points @ n - d < max(band * tol, spread)
         removed["floor"] = int(gone.sum())
         keep &= ~gone
         floor = (n, d)
@@ -129,6 +144,7 @@ def separate_object(points: np.ndarray, c2ws: np.ndarray, interaction_c2ws: np.n
         if wall is None:
             break
         n, d, inl = wall
+        inl = inl | (np.abs(rest @ n - d) < band * tol)
         idx = np.flatnonzero(keep)[inl]
         keep[idx] = False
         removed[f"wall_{it}"] = int(len(idx))
@@ -137,6 +153,20 @@ def separate_object(points: np.ndarray, c2ws: np.ndarray, interaction_c2ws: np.n
     mask = keep & _connected_to(points, keep, seed_pts, boxes, voxel)
     removed["disconnected"] = int((keep & ~mask).sum())
     return Separation(mask, up, floor, walls, removed)
+
+
+def _plane_band(heights: np.ndarray, d: float, tol: float) -> tuple[float, float]:
+    """A plane's offset at the middle of its points (RANSAC's plane, accepted with nearly all
+    points above it, hugs the bottom of a noisy floor) and its half thickness: ``tol`` or 3
+    robust sigmas of the points near it, whichever is larger."""
+    spread = tol
+    for _ in range(3):
+        near = np.abs(heights - d) < 3 * spread
+        if near.sum() < 10:
+            break
+        d = float(np.median(heights[near]))
+        spread = max(tol, 3 * 1.4826 * float(np.median(np.abs(heights[near] - d))))
+    return d, spread
 
 
 def _seed_radius(seed_pts: np.ndarray, boxes, scale: float) -> float:

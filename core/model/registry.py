@@ -54,6 +54,9 @@ class ReconstructOptions:
 
     iterations: int | None = option(None, "iteration cap (default: until converged)")
     holdout: int = option(0, "static views held out for evaluation")
+    separate: bool = option(True, "for a capture without masks, first separate the object from "
+                            "the room and write its box to crop.json, which every stage then "
+                            "uses (--no-separate: keep the room)")
     device: str = _device()
     max_side: int = _max_side()
 

@@ -33,8 +33,10 @@ import numpy as np
 import torch
 
 from ..geometry.consistency import unsupported
+from ..geometry.crop_capture import crop_capture, needs_separation, separation_crop
 from ..model import layout
 from ..model.capture import Capture, Frame
+from ..model.crop import read_crop, write_crop
 from ..model.errors import ArtgsError, InputError, NothingFound
 from ..model.memory import available_bytes, gigabytes
 from ..model.ply import SplatArrays, write_ply
@@ -366,6 +368,29 @@ def check(capture: Capture, options: ReconstructOptions) -> None:
 
 def run(out: Path, capture: Capture, options: ReconstructOptions,
         progress: Progress) -> dict[str, Any]:
-    """The reconstruct stage (registry entry): OUT/splat.ply and its figures."""
-    return reconstruct(capture, out, progress, iterations=options.iterations,
-                       holdout=options.holdout, device=options.device)
+    """The reconstruct stage (registry entry): OUT/splat.ply and its figures. A capture without
+    masks is first cropped to the object (:func:`separate_room`)."""
+    figures: dict[str, Any] = {}
+    if options.separate and read_crop(out) is None and needs_separation(capture):
+        capture, figures = separate_room(capture, out, progress)
+    return {**reconstruct(capture, out, progress, iterations=options.iterations,
+                          holdout=options.holdout, device=options.device), **figures}
+
+
+def separate_room(capture: Capture, out: Path, progress: Progress) -> tuple[Capture, dict]:
+    """Separate the object from the room in the static views' depth, write its box to
+    OUT/crop.json and return the capture as the stages will see it (core/geometry/crop_capture.py)."""
+    found = separation_crop(capture)
+    if found is None:
+        progress.log("reconstruct: no object separated from the room; the splat holds everything")
+        return capture, {"separation": "nothing separated, the room kept"}
+    box, how = found
+    write_crop(out, box)
+    cropped = crop_capture(capture, box)
+    kept = float(np.mean([f.mask.mean() for f in cropped.static]))
+    size = np.round(2 * box.half_size, 3).tolist()
+    progress.log(f"reconstruct: no masks; the object separated from the room (floor by RANSAC, "
+                 f"walls, the piece where the interaction cameras look): box {size} m written to "
+                 f"{layout.CROP}, {100 * kept:.0f} % of the static pixels kept")
+    return cropped, {"separation": {**how, "crop": layout.CROP, "box_size": size,
+                                    "static_pixels_kept": round(kept, 4)}}

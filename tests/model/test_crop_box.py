@@ -109,3 +109,15 @@ def test_blender_crop_box_reaches_the_engine_and_crops_the_export(ctx, tmp_path)
     # deleting the box removes the crop the add-on wrote
     bpy.data.objects.remove(obj)
     assert sync_crop(scene, out) is None and not (out / layout.CROP).exists()
+    # a box already in OUT (reconstruct's separation of a capture without masks) becomes the Empty
+    from artgs.artgs_addon.crop_box import crop_of
+    c, s = np.cos(0.4), np.sin(0.4)
+    sep = CropBox(np.array([0.1, -0.2, 0.5]), np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]]),
+                  np.array([0.3, 0.2, 0.5]), "separation")
+    write_crop(out, sep)
+    assert bpy.ops.artgs.add_crop_box() == {"FINISHED"}
+    bpy.context.view_layer.update()
+    adopted = crop_of(scene.objects[CROP_BOX])
+    np.testing.assert_allclose(adopted.center, sep.center, atol=1e-5)
+    np.testing.assert_allclose(adopted.axes, sep.axes, atol=1e-5)
+    np.testing.assert_allclose(adopted.half_size, sep.half_size, atol=1e-5)

@@ -25,6 +25,7 @@ import numpy as np
 import trimesh
 
 from ...geometry.parts import assign_parts
+from ...geometry.crop_capture import SEPARATION
 from ...geometry.separate import separate_object
 from ...model import atomic, layout
 from ...model.capture import Capture
@@ -62,7 +63,7 @@ def run(out: Path, capture: Capture | None, options: ExportOptions, progress: Pr
     joints = ordered_joints(articulation.joints, joints_path)
     crop = read_crop(out)
     labels, label_source = part_labels(out, splat, joints)
-    separation = object_mask(out, splat, joints, capture, options)
+    separation = object_mask(out, splat, joints, capture, options, crop)
     if crop is not None:
         separation = crop_mask(out, splat, crop, separation)
     labels = np.where(separation["mask"], labels, -1)
@@ -156,9 +157,12 @@ def part_labels(out: Path, splat: SplatArrays, joints: list[Joint]) -> tuple[np.
 
 
 def object_mask(out: Path, splat: SplatArrays, joints: list[Joint], capture: Capture | None,
-                options: ExportOptions) -> dict[str, Any]:
-    """Per-Gaussian object mask (written to object_mask.npy) and how it was found."""
-    masked = capture is None or all(f.mask is not None for f in capture.frames)
+                options: ExportOptions, crop: CropBox | None = None) -> dict[str, Any]:
+    """Per-Gaussian object mask (written to object_mask.npy) and how it was found. A capture
+    whose masks come from reconstruct's separation (crop.json's source) is separated again, now
+    with the moving parts as seeds."""
+    masked = (capture is None or all(f.mask is not None for f in capture.frames)) and \
+        (crop is None or crop.source != SEPARATION)
     if options.separate == "none" or (options.separate == "auto" and masked):
         mask = np.ones(len(splat), bool)
         how = ("none: the capture has masks, the splat holds the object only" if masked
