@@ -7,10 +7,12 @@ has depth points, reconstruct, separates the object in the static views' fused d
 writes the object's closed box to ``OUT/crop.json`` (``source: "separation"``; a box the user drew
 is kept). Every stage then sees the capture through :func:`crop_capture`:
 
-- a pixel with depth is object when its point lies inside the box (static views) or inside the box
-  grown by its largest horizontal extent sideways and upwards (interaction frames: a door or a
-  drawer leaves the closed box by at most the object's size, a lid rises by at most its depth),
-  and not below the box's bottom (the floor stays out);
+- a pixel with depth is object when its point lies inside the box grown by its largest horizontal
+  extent sideways and upwards (a door or a drawer leaves the closed box by at most the object's
+  size, a lid rises by at most its depth) and not below the box's bottom (the floor stays out);
+  the static views use the same region as the interaction frames, so that what an interaction
+  frame's mask holds beside the object (a wall, furniture) is in the splat and explained as
+  static, not mistaken for motion; the export keeps only the box itself;
 - a pixel without depth (dark, grazing, a depth edge) is object when its ray passes through that
   box, so a black door keeps its colour pixels;
 - where the capture has a mask, the result is the mask AND the box.
@@ -135,7 +137,6 @@ def crop_capture(capture: Capture, box: CropBox | None) -> Capture:
         return capture
     up = camera_up(np.array([f.camera.c2w for f in capture.frames]))
     grown, bottom = moving_box(box, up)
-    frames = [dataclasses.replace(f, mask=frame_crop_mask(
-        f, box if f.phase == "static" else grown, None if f.phase == "static" else bottom, up))
-        for f in capture.frames]
+    frames = [dataclasses.replace(f, mask=frame_crop_mask(f, grown, bottom, up))
+              for f in capture.frames]
     return dataclasses.replace(capture, frames=frames)
