@@ -31,7 +31,7 @@ from .separate import camera_up, separate_object
 
 SEPARATION = "separation"
 MAX_POINTS = 200_000
-BAND = 2.5           # raw depth: floor and walls go up to 2.5 plane tolerances in front of them
+BAND = 2.5           # raw depth: a wall goes with 2.5 plane tolerances on either side of it
 
 
 def needs_separation(capture: Capture) -> bool:
