@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from .geometry.crop_capture import crop_capture
+from .geometry.crop_capture import SEPARATED_BY, SEPARATION, crop_capture
 from .model import layout, registry
 from .model.crop import read_crop
 from .model.capture import Capture, load_capture, resolution_note
@@ -77,7 +77,9 @@ def _run_stage(spec: StageSpec, out: Path, options: Any, progress: Progress,
         loaded = capture if isinstance(capture, Capture) else \
             load_capture(layout.capture_of(out, capture), max_side=_max_side(options))
         _log_resolution(loaded, progress)
-        loaded = crop_capture(loaded, read_crop(out))
+        box = read_crop(out)
+        if not (box is not None and box.source == SEPARATION and spec.name == SEPARATED_BY):
+            loaded = crop_capture(loaded, box)      # the separating stage makes its box anew
     check_stage(spec, loaded, options)
     progress.start(spec.name, spec.title.lower())
     figures = resolve(spec.run)(out, loaded, options, progress)

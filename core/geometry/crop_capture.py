@@ -30,6 +30,7 @@ from .consistency import unsupported
 from .separate import camera_up, separate_object
 
 SEPARATION = "separation"
+SEPARATED_BY = "reconstruct"   # the stage that writes the separation's crop.json
 MAX_POINTS = 200_000
 BAND = 2.5           # raw depth: a wall goes with 2.5 plane tolerances on either side of it
 

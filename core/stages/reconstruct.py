@@ -33,7 +33,7 @@ import numpy as np
 import torch
 
 from ..geometry.consistency import unsupported
-from ..geometry.crop_capture import crop_capture, needs_separation, separation_crop
+from ..geometry.crop_capture import SEPARATION, crop_capture, needs_separation, separation_crop
 from ..model import layout
 from ..model.capture import Capture, Frame
 from ..model.crop import read_crop, write_crop
@@ -371,7 +371,11 @@ def run(out: Path, capture: Capture, options: ReconstructOptions,
     """The reconstruct stage (registry entry): OUT/splat.ply and its figures. A capture without
     masks is first cropped to the object (:func:`separate_room`)."""
     figures: dict[str, Any] = {}
-    if options.separate and read_crop(out) is None and needs_separation(capture):
+    box = read_crop(out)
+    ours = box is not None and box.source == SEPARATION     # made by an earlier run: made anew
+    if ours:
+        (out / layout.CROP).unlink()
+    if options.separate and (box is None or ours) and needs_separation(capture):
         capture, figures = separate_room(capture, out, progress)
     return {**reconstruct(capture, out, progress, iterations=options.iterations,
                           holdout=options.holdout, device=options.device), **figures}

@@ -84,6 +84,14 @@ def test_reconstruct_writes_the_box_and_later_stages_see_its_masks(roomy, tmp_pa
     assert box is not None and box.source == SEPARATION
     assert figures["separation"]["crop"] == layout.CROP
     assert 0 < figures["separation"]["static_pixels_kept"] < 0.9
+    # run again on the capture with its masks: the separation's old box goes (it would crop it)
+    run_stage("reconstruct", out, ReconstructOptions(iterations=3), Progress("quiet"),
+              capture=truth)
+    assert read_crop(out) is None
+    run_stage("reconstruct", out, ReconstructOptions(iterations=3), Progress("quiet"),
+              capture=bare)
+    box = read_crop(out)
+    assert box is not None and box.source == SEPARATION
     # a crop.json already in OUT (the user's) is kept as it is
     user = dataclasses.replace(box, source="blender")
     (out / layout.CROP).unlink()
