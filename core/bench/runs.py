@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ..geometry.crop_capture import crop_capture, needs_separation
+from ..geometry.crop_capture import SEPARATION, crop_capture
 from ..model import layout
 from ..model.crop import read_crop
 from ..model.capture import Capture, load_capture
@@ -93,15 +93,16 @@ def prepare(capture_dir: Path, work: Path, iterations: int | None = None,
     depth-initialised (``iterations`` 0), or reconstructed for ``iterations`` iterations (None:
     until converged, as ``artgs run``). A capture without masks is separated from the room first
     and returned as the stages see it, as ``artgs run`` does (core/geometry/crop_capture.py)."""
-    from ..stages.reconstruct import initial_splats, reconstruct, separate_room
+    from ..stages.reconstruct import initial_splats, reconstruct, separated
 
     capture = load_capture(capture_dir)
     gt = read_articulation(capture_dir / "gt.json")
     out = work / capture_dir.name
     out.mkdir(parents=True, exist_ok=True)
-    if read_crop(out) is None and needs_separation(capture):
-        separate_room(capture, out, QUIET)
-    capture = crop_capture(capture, read_crop(out))
+    box = read_crop(out)
+    if box is not None and box.source != SEPARATION:
+        capture = crop_capture(capture, box)            # a user's box, as the pipeline applies
+    capture, _ = separated(capture, out, QUIET)
     if iterations != 0:
         reconstruct(capture, out, QUIET, iterations=iterations, device=device)
     else:

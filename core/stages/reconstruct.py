@@ -370,15 +370,25 @@ def run(out: Path, capture: Capture, options: ReconstructOptions,
         progress: Progress) -> dict[str, Any]:
     """The reconstruct stage (registry entry): OUT/splat.ply and its figures. A capture without
     masks is first cropped to the object (:func:`separate_room`)."""
-    figures: dict[str, Any] = {}
+    capture, figures = separated(capture, out, progress, options.separate)
+    return {**reconstruct(capture, out, progress, iterations=options.iterations,
+                          holdout=options.holdout, device=options.device), **figures}
+
+
+def separated(capture: Capture, out: Path, progress: Progress,
+              separate: bool = True) -> tuple[Capture, dict]:
+    """The capture as the stages after reconstruct see it, and the separation's figures.
+
+    ``capture`` is already cropped by a user's box, if OUT has one (the pipeline does that); a box
+    an earlier separation wrote is removed and, when ``separate`` and the static views have no
+    masks, made anew (:func:`separate_room`)."""
     box = read_crop(out)
     ours = box is not None and box.source == SEPARATION     # made by an earlier run: made anew
     if ours:
         (out / layout.CROP).unlink()
-    if options.separate and (box is None or ours) and needs_separation(capture):
-        capture, figures = separate_room(capture, out, progress)
-    return {**reconstruct(capture, out, progress, iterations=options.iterations,
-                          holdout=options.holdout, device=options.device), **figures}
+    if separate and (box is None or ours) and needs_separation(capture):
+        return separate_room(capture, out, progress)
+    return capture, {}
 
 
 def separate_room(capture: Capture, out: Path, progress: Progress) -> tuple[Capture, dict]:
