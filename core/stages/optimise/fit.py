@@ -256,17 +256,32 @@ def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitCon
         if t == 0:
             continue
         ids = frames.at_time(ti)
-        best, best_v = np.inf, 0.0
-        for v in candidates:
-            model.states[k, ti] = float(v) / unit
-            loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids)
-            if loss < best:
-                best, best_v = loss, float(v)
-        states[k, ti] = best_v / unit
+
+        def loss_at(v: float) -> float:
+            model.states[k, ti] = v / unit
+            return sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids)
+
+        states[k, ti] = best_value(loss_at, candidates)[1] / unit
         model.states[k, ti] = states[k, ti]
     at_rest = (states[k] * model.moving).cpu().numpy()       # time 0's value is 0
     states[k] = torch.as_tensor(median3(at_rest), device=states.device)
     model.states = states
+
+
+def best_value(loss_at: Callable[[float], float], candidates: np.ndarray,
+               halvings: int = 2) -> tuple[float, float]:
+    """The lowest ``loss_at(v)`` over the ``candidates`` grid, refined by ``halvings`` rounds
+    of trying half the previous spacing on either side of the best: (loss, value). The grid
+    alone resolves a slide to 5 % of the object's size, and at a time a part has moved less
+    than that every hypothesis scores as the part at rest (a realistic cabinet's two drawers,
+    3 and 6 cm out on a 7.4 cm grid, ranked a sideways slide above their pull direction)."""
+    grid = np.unique(np.asarray(candidates, float))
+    best = min((loss_at(float(v)), float(v)) for v in grid)
+    step = float(np.median(np.diff(grid))) if len(grid) > 1 else 0.0
+    for _ in range(halvings if step > 0 else 0):
+        step /= 2
+        best = min([best] + [(loss_at(best[1] + d), best[1] + d) for d in (-step, step)])
+    return best
 
 
 def median3(values: np.ndarray) -> np.ndarray:

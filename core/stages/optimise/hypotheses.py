@@ -328,16 +328,16 @@ def score_at(model: ArticulatedSplat, frames, cfg, k: int, ti: int, values: np.n
         tuple[float, float]:
     """Lowest image loss (half resolution) at time index ``ti`` over joint ``k``'s candidate ``values``
     (rad / m), and the value reaching it."""
-    from .fit import frame_loss
+    from .fit import best_value, frame_loss
     level = score_level(frames)
     ids = frames.at_time(ti)
     unit = model.unit_of(model.types[k])
-    best = (np.inf, 0.0)
-    for v in values:
-        model.states[k, ti] = float(v) / unit
-        loss = sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids) / len(ids)
-        best = min(best, (loss, float(v)))
-    return best
+
+    def loss_at(v: float) -> float:
+        model.states[k, ti] = v / unit
+        return sum(float(frame_loss(model, frames, level, i, cfg)) for i in ids) / len(ids)
+
+    return best_value(loss_at, values)
 
 def moving_frames(model: ArticulatedSplat, frames, k: int) -> list[int]:
     """Frames where joint ``k`` is away from 0 by more than 10 % of its largest value."""
