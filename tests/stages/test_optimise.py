@@ -1228,3 +1228,19 @@ def test_depth_votes_give_the_parts_back(cabinet):
     moved = reassign(run, 10, 0.1, [False] * len(gt))
     assert moved and (m.labels() != wrong).sum() > 100
     assert float(evaluate(m, frames, cfg).mean()) < before
+
+
+def test_best_value_refines_between_grid_points():
+    """A minimum between two grid values is found to a quarter of the grid's step, and a loss
+    whose minimum lies on the grid keeps that value."""
+    from artgs.core.stages.optimise.fit import best_value
+    grid = np.linspace(-0.4, 0.4, 17)                  # 5 cm steps
+    calls = []
+
+    def loss(v: float) -> float:
+        calls.append(v)
+        return (v - 0.043) ** 2
+    value = best_value(loss, grid)[1]
+    assert abs(value - 0.043) <= 0.05 / 8 + 1e-12     # the grid alone: 0.05, 7 mm off
+    assert len(calls) == 17 + 4
+    assert best_value(lambda v: abs(v - 0.1), grid)[1] == pytest.approx(0.1, abs=1e-12)
