@@ -118,7 +118,7 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
         sign = 1.0 if new.axis @ axis >= 0 else -1.0    # refine_joint may flip axis and values
         refined = {t: sign * v for t, v in values.items()}
         refined.update(zip(moving, map(float, new.values)))
-        model.set_type(k, model.types[k], new.axis, new.origin, refined)
+        model.set_type(k, model.types[k], new.axis, new.origin, refined, shading=True)
         there = float(run.evaluate(0, ids).mean())
         turn = float(np.degrees(np.arccos(np.clip(abs(new.axis @ axis), -1, 1))))
         shift = float(np.linalg.norm(np.cross(new.origin - origin, axis))) \

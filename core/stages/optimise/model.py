@@ -356,16 +356,19 @@ class ArticulatedSplat:
                 for ti, t in enumerate(self.times)}
 
     def set_type(self, k: int, kind: str, axis: np.ndarray, origin: np.ndarray,
-                 values: dict[int, float] | np.ndarray) -> None:
-        """Replace joint ``k``'s hypothesis (type, axis, point, states in rad / m)."""
+                 values: dict[int, float] | np.ndarray, shading: bool = False) -> None:
+        """Replace joint ``k``'s hypothesis (type, axis, point, states in rad / m). The part's
+        learnt brightness per time (:meth:`shaded`) starts again from 1, unless ``shading``
+        (the same motion refined: the brightness the part shows at each time stays)."""
         assert kind in (REVOLUTE, PRISMATIC)
         with torch.no_grad():
             self.types[k] = kind
             self.axes = self.axes.detach().clone()
             self.origins = self.origins.detach().clone()
             self.states = self.states.detach().clone()
-            self.gains = self.gains.detach().clone()
-            self.gains[k] = 0.0
+            if not shading:
+                self.gains = self.gains.detach().clone()
+                self.gains[k] = 0.0
             self.axes[k] = torch.as_tensor(np.asarray(axis, float), dtype=torch.float32)
             self.origins[k] = torch.as_tensor(np.asarray(origin, float), dtype=torch.float32)
             v = np.asarray([values[t] for t in self.times] if isinstance(values, dict)
