@@ -97,6 +97,9 @@ class OptimiseOptions:
     seed: int = option(0, "random seed of the frame sampling")
     cameras: bool = option(False, "learn a small correction (rotation, translation) of each fixed "
                            "interaction camera (--no-cameras: take them as registered)")
+    square: bool = option(True, "try each joint along the nearest side of the body's box (its "
+                          "up and footprint), kept when it explains the frames no worse than "
+                          "the fit (--no-square: the fit's directions)")
     depth: bool = option(True, "refine each joint last on the interaction frames' depth, kept "
                          "unless the image loss says it is worse (--no-depth: the rendering "
                          "fit's joints)")

@@ -114,8 +114,8 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         rng: np.random.Generator, *, free: list[bool] | None = None,
         times: list[int] | None = None, prior: torch.Tensor | None = None,
         tick: Callable[[int, float], None] | None = None, coarse: float = 0.0,
-        lr_scale: float = 1.0, coarse_level: int | None = None, other: Other | None = None
-        ) -> float:
+        lr_scale: float = 1.0, coarse_level: int | None = None, other: Other | None = None,
+        hold: tuple[str, ...] = ()) -> float:
     """Run ``steps`` Adam steps; returns the mean loss of the last quarter of them.
 
     ``free``: joints that move (default all; the camera corrections, when learnt, move only
@@ -126,7 +126,8 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
     ``lr_scale``: multiplies the learning rates (refining phases start below the first fit's
     rates: Adam's steps are about the learning rate whatever the gradient, so a converged
     solution restarted at full rate would wander off); ``other``: where each step's second half
-    of frames is rendered (default here).
+    of frames is rendered (default here); ``hold``: parameters (of :meth:`ArticulatedSplat.params`,
+    e.g. ``"axes"``) that stay as they are.
     """
     if steps <= 0 or model.k == 0:
         return float("nan")
@@ -178,6 +179,9 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
                 p.grad = g.clone() if p.grad is None else p.grad.add_(g)
         if free is not None and "cameras" in opt.params:   # one joint's hypothesis: cameras stay
             opt.params["cameras"].grad = None
+        for name in hold:
+            if name in opt.params:
+                opt.params[name].grad = None
         for name in ("axes", "origins", "states", "gains"):
             if name not in opt.params:
                 continue

@@ -55,6 +55,7 @@ from .fit import FitConfig, fit, search_states
 from .frames import FrameSet, interaction_frames
 from ..robot_twin import tool_path
 from .occluders import known_occluders
+from .square import square_to_body
 from .plausible import HIDDEN_SHARE, OpenSpace, into_body, little_motion, open_space
 from .model import ArticulatedSplat, Splat
 from .kinematics import REVOLUTE
@@ -258,11 +259,14 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         sort_out(hypotheses.remove_spurious(run, locked=model.locked.tolist(), join=True),
                  added, removed, rejected)
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
+    squared = square_to_body(run, capture, fixed(), max(n // 6, 1)) \
+        if options.square and model.k else {}
     depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
     losses = run.evaluate()
     for name in run.weak & set(model.names):
         evidence.setdefault(name, {})["weak"] = True
-    result = export(model, frames, joints, losses, evidence, cfg, space, depth)
+    result = export(model, frames, joints, losses, evidence, cfg, space,
+                    {"square": squared, "depth_fit": depth})
     if not result:
         raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
                            f"frames and the frames show no part moving that the model does not "
@@ -278,7 +282,8 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
                "merged": merged,
                "trimmed": trimmed, "assigned": assigned,
                "cameras": camera_corrections(model),
-               "kept_start": kept_start, "added": added, "rejected": rejected,
+               "kept_start": kept_start, "squared": squared, "added": added,
+               "rejected": rejected,
                "depth": depth,
                "types": [j.type for j in result], "processes": run.processes,
                "seconds": round(time.perf_counter() - t0, 2)}
@@ -325,7 +330,7 @@ def write_labels(path: Path, labels: np.ndarray) -> None:
 
 def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losses: np.ndarray,
            evidence: dict[str, dict[str, Any]], cfg: FitConfig,
-           space: OpenSpace | None, depth: dict[str, dict[str, Any]] | None = None
+           space: OpenSpace | None, reports: dict[str, dict[str, dict[str, Any]]] | None = None
            ) -> list[Joint]:
     """The fitted joints with states, observed range as limit, residual and confidence.
 
@@ -333,8 +338,8 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
     fitted (a 10 % lower loss than the other type counts as decisive), halved when the evidence
     is weak (the part displaced by under 5 % of its size, or under 50 Gaussians) or the
     part opens into the body (:func:`.plausible.into_body` in ``space``, the static views).
-    ``depth``: per joint the report of the depth refinement (:mod:`.depth_fit`), kept in the
-    joint's ``extra["depth_fit"]``.
+    ``reports``: per key, per joint the report of a late step (``square``: :mod:`.square`,
+    ``depth_fit``: :mod:`.depth_fit`), kept in the joint's ``extra[key]``.
     """
     labels = model.labels()
     means = model.splat.means.cpu().numpy()
@@ -386,8 +391,7 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
         extra = {key: v for key, v in src.extra.items() if key != "alternative"} if src else {}
         extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
                      evidence=ev, warnings=warnings, into_body=round(inside, 4))
-        if depth and name in depth:
-            extra["depth_fit"] = depth[name]
+        extra.update({key: r[name] for key, r in (reports or {}).items() if name in r})
         result.append(Joint(
             name=name, type=kind, axis=axis, origin=origin, limit=(lo, hi),
             parent=src.parent if src else "base", child=src.child if src else f"{name}_link",
