@@ -54,10 +54,16 @@ def clearly_better(without: np.ndarray, with_: np.ndarray, ids: list[int]) -> bo
     if len(ids) < 2:
         return False
     a, b = without[ids], with_[ids]
-    d = a - b
-    se = d.std(ddof=1) / np.sqrt(len(d))
-    return bool(b.mean() < a.mean() * (1 - REMOVE_TOL) and (se == 0 or
-                                                           d.mean() / se > SIGNIFICANT))
+    return bool(b.mean() < a.mean() * (1 - REMOVE_TOL) and paired_t(a - b) > SIGNIFICANT)
+
+
+def paired_t(d: np.ndarray) -> float:
+    """The paired t statistic of per-frame differences ``d`` (0 for fewer than 2; +-inf for a
+    difference without spread, 0 without either)."""
+    if len(d) < 2:
+        return 0.0
+    se = float(d.std(ddof=1)) / np.sqrt(len(d))
+    return float(d.mean() / se) if se > 0 else float(np.sign(d.mean()) * np.inf)
 
 def state_candidates(model: ArticulatedSplat, k: int) -> np.ndarray:
     """Values searched for a joint without states: ±120° in 15° steps, or ±40 % of the object

@@ -29,7 +29,7 @@ import numpy as np
 from ...geometry.rectangle import upright_axes
 from ...geometry.separate import camera_up
 from ...model.capture import Capture
-from .hypotheses import REMOVE_TOL, SIGNIFICANT, moving_frames, part_points
+from .hypotheses import REMOVE_TOL, SIGNIFICANT, moving_frames, paired_t, part_points
 from .kinematics import REVOLUTE
 from .model import restore, snapshot
 
@@ -55,15 +55,6 @@ def nearest_axis(axis: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, float]
     cos = axes @ axis
     i = int(np.argmax(np.abs(cos)))
     return axes[i] * np.sign(cos[i] or 1.0), float(np.degrees(np.arccos(min(abs(cos[i]), 1.0))))
-
-
-def paired_t(d: np.ndarray) -> float:
-    """The paired t statistic of per-frame differences ``d`` (0 for fewer than 2 or no spread
-    with a zero mean; +-inf for a consistent difference without spread)."""
-    if len(d) < 2:
-        return 0.0
-    se = float(d.std(ddof=1)) / np.sqrt(len(d))
-    return float(d.mean() / se) if se > 0 else float(np.sign(d.mean()) * np.inf)
 
 
 def square_to_body(run, capture: Capture, fixed: list[bool], steps: int
