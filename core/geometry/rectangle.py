@@ -17,6 +17,21 @@ def turned_boxes(xy: np.ndarray, degrees: np.ndarray, percentiles: tuple[float, 
     return (hi1 - lo1) * (hi2 - lo2), np.c_[lo1, lo2], np.c_[hi1, hi2]
 
 
+def smallest_turn(xy: np.ndarray, percentiles: tuple[float, float], fine: float | None
+                  ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """The turn (degrees) of the smallest-area ``percentiles`` box of ``xy`` over 1 deg steps,
+    then (``fine``) over steps of that many degrees within 1 deg of the best; its low and high
+    corners, and the areas of the 1 deg steps' boxes (90,)."""
+    degrees = np.arange(0.0, 90.0, 1.0)
+    coarse, lo, hi = turned_boxes(xy, degrees, percentiles)
+    area, best = coarse, int(np.argmin(coarse))
+    if fine:
+        degrees = degrees[best] + np.arange(-1.0, 1.0 + fine / 2, fine)
+        area, lo, hi = turned_boxes(xy, degrees, percentiles)
+        best = int(np.argmin(area))
+    return float(degrees[best]), lo[best], hi[best], coarse
+
+
 def smallest_rectangle(xy: np.ndarray, percentiles: tuple[float, float] = (1.0, 99.0),
                        limit: int | None = None, fine: float | None = None
                        ) -> tuple[float, np.ndarray, np.ndarray]:
@@ -27,14 +42,8 @@ def smallest_rectangle(xy: np.ndarray, percentiles: tuple[float, float] = (1.0, 
     degrees within 1 deg of the best."""
     if limit is not None:
         xy = xy[:: max(1, len(xy) // limit)]
-    degrees = np.arange(0.0, 90.0, 1.0)
-    area, lo, hi = turned_boxes(xy, degrees, percentiles)
-    best = int(np.argmin(area))
-    if fine:
-        degrees = degrees[best] + np.arange(-1.0, 1.0 + fine / 2, fine)
-        area, lo, hi = turned_boxes(xy, degrees, percentiles)
-        best = int(np.argmin(area))
-    return float(np.radians(degrees[best])), lo[best], hi[best]
+    turn, lo, hi, _ = smallest_turn(xy, percentiles, fine)
+    return float(np.radians(turn)), lo, hi
 
 
 def upright_axes(points: np.ndarray, up: np.ndarray, limit: int = 20000, fine: float = 0.05,
@@ -51,9 +60,11 @@ def upright_axes(points: np.ndarray, up: np.ndarray, limit: int = 20000, fine: f
     p = np.asarray(points, float)
     p = p[:: max(1, len(p) // limit)]
     xy = np.c_[p @ u, p @ v]
-    area = turned_boxes(xy, np.arange(0.0, 90.0, 1.0), (1.0, 99.0))[0]
-    if len(p) < 10 or area.max() < round_contrast * area.min():
+    if len(p) < 10:
         return up[None]
-    t = smallest_rectangle(xy, fine=fine)[0]
+    turn, _, _, area = smallest_turn(xy, (1.0, 99.0), fine)
+    if area.max() < round_contrast * area.min():
+        return up[None]
+    t = np.radians(turn)
     side = np.cos(t) * u + np.sin(t) * v
     return np.array([up, side, np.cross(up, side)])
