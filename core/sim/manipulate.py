@@ -14,8 +14,8 @@ One episode per joint, in its own ``DIRECT`` client:
   gripper's grasp point and the part, limited to ``GRASP_FORCE`` (a parallel gripper's holding
   force times friction 1); collisions between robot and object are off;
 - the gripper follows the handle path of the PLANNED joint (minimum-jerk in the joint value) under
-  Cartesian impedance control in operational-space form, tau = J^T Lambda (K (x_d - x) - D xdot)
-  + C(q, qdot) qdot + g(q) (gravity and Coriolis from PyBullet's inverse dynamics) plus a null-space
+  Cartesian impedance control in operational-space form, tau = J^T Lambda (K (x_d - x) + D (xdot_d
+  - xdot)) + C(q, qdot) qdot + g(q) (gravity and Coriolis from PyBullet's inverse dynamics) plus a null-space
   posture term (``_Robot.impedance_step``); the URDF's joint damping is switched off (the
   controller damps; an explicit damping of 1 N m s on xarm6's 0.1 kg wrist is unstable at 240 Hz);
 - the grasp is lost when the gripper and the grasped point drift ``LOST_DISTANCE`` apart;
@@ -47,7 +47,8 @@ K_ROT, D_ROT = 30.0 ** 2, 2 * 30.0
 NULL_STIFFNESS, NULL_DAMPING = 10.0, 2 * 10.0 ** 0.5
 LAMBDA_DAMPING = 1e-4       # regularises (J M^-1 J^T) near singular poses
 OVERSHOOT = 1.15            # the plan goes this much past the target
-REHEARSALS = 2              # robot placements rehearsed along the plan (see _place_robot)
+REHEARSALS = 6              # at most this many robot placements rehearsed along the plan
+TRACKED = 0.01              # m: a rehearsal this close to the plan ends the search (_place_robot)
 
 
 @dataclass(frozen=True)
@@ -189,8 +190,8 @@ def run_episode(object_urdf: str, task: Task, robot: str = "franka_panda", frame
         shots = set(np.linspace(0, steps + hold - 1, frames).round().astype(int).tolist())
         camera = _camera(task.handle, task.approach, goals[-1][:3, 3], size)
         images, lost, worst, reached, held = [], False, 0.0, 0.0, 0.0
-        for k, goal in enumerate(goals):
-            worst = max(worst, bot.impedance_step(goal))
+        for k, (goal, speed) in enumerate(zip(goals, _velocities(goals))):
+            worst = max(worst, bot.impedance_step(goal, speed))
             p.stepSimulation(physicsClientId=client)
             reached = p.getJointState(obj, link, physicsClientId=client)[0]
             if not lost:
@@ -281,10 +282,12 @@ class _Robot:
                                         forces=[20.0] * len(self.fingers),
                                         physicsClientId=self.client)
 
-    def impedance_step(self, goal: np.ndarray) -> float:
+    def impedance_step(self, goal: np.ndarray, speed: np.ndarray) -> float:
         """Apply one step of Cartesian impedance control in the operational-space form,
-        tau = J^T Lambda (K e - D v) + C(q, qd) qd + g(q) + null-space posture, and return the
-        position error.
+        tau = J^T Lambda (K e + D (v_d - v)) + C(q, qd) qd + g(q) + null-space posture, and
+        return the position error. ``speed`` is the goal's (linear, angular) velocity v_d: damping
+        towards it rather than towards rest keeps the gripper on a moving goal (damping towards
+        rest makes it lag by D v / K, 5 cm and more on a door's sweep).
 
         Lambda = (J M^-1 J^T)^-1 (PyBullet's mass matrix) scales damping and orientation gains
         to the arm's task-space inertia, so one set of gains is stable for every robot and pose
@@ -316,7 +319,7 @@ class _Robot:
         # stiffness in N/m (how hard the gripper insists on the plan, against the grasp's force
         # limit, is what decides a wrong plan); damping and orientation per unit task mass
         spring = np.concatenate([K_POS * e_pos, np.zeros(3)])
-        accel = np.concatenate([-D_POS * v, K_ROT * e_rot - D_ROT * w])
+        accel = np.concatenate([D_POS * (speed[:3] - v), K_ROT * e_rot + D_ROT * (speed[3:] - w)])
         bias = np.array(p.calculateInverseDynamics(self.body, q, qd, zeros, physicsClientId=c))
         qd_arm = np.array(qd[:n])
         J_bar = M_inv @ J.T @ Lam
@@ -329,6 +332,14 @@ class _Robot:
         return float(np.linalg.norm(e_pos))
 
 
+def _velocities(goals: list[np.ndarray]) -> list[np.ndarray]:
+    """Per goal pose, the (linear, angular) velocity towards the next one; zero at the last."""
+    T = np.stack(goals)
+    linear = np.diff(T[:, :3, 3], axis=0) / DT
+    angular = _rotvec(T[1:, :3, :3] @ T[:-1, :3, :3].transpose(0, 2, 1)) / DT
+    return list(np.hstack([linear, angular])) + [np.zeros(6)]
+
+
 def _min_jerk(s: float) -> float:
     return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
 
@@ -339,10 +350,11 @@ def _place_robot(model: RobotModel, body: int, goals: list[np.ndarray], client: 
 
     Candidates in front of the path are ranked by inverse kinematics along the path (seeded from
     the rest pose, and again each pose from the last), first by reaching the grasp, then by the
-    worst miss and joint-limit margin; the best ``REHEARSALS`` then rehearse the whole path under
-    the impedance controller without the object (collisions with it are off) and the one that
-    tracks it best is kept. IK alone ranks a pose by where the arm could be, not by where the
-    controller takes it near joint limits, so the rehearsal decides. Only the plan is used: the
+    worst miss and joint-limit margin; in that order, distinct bases then rehearse the whole path
+    under the impedance controller without the object (collisions with it are off) until one
+    tracks it within ``TRACKED`` (or ``REHEARSALS`` have), and the one that tracked best is kept.
+    IK alone ranks a pose by where the arm could be, not by where the controller takes it near
+    joint limits, so the rehearsal decides. Only the plan is used: the
     true joint plays no part in where the robot stands."""
     import pybullet as p
 
@@ -367,13 +379,18 @@ def _place_robot(model: RobotModel, body: int, goals: list[np.ndarray], client: 
                     ranked.append((*_ik_score(robot, path, sequential), base))
     ranked.sort(key=lambda r: r[:2])
     saved = p.saveState(physicsClientId=client)
-    best, best_err = None, np.inf
-    for _, _, qs, base in ranked[:REHEARSALS]:
+    best, best_err, tried, speeds = None, np.inf, [], _velocities(goals)
+    for _, _, qs, base in ranked:
+        if best_err <= TRACKED or len(tried) == REHEARSALS:
+            break
+        if any(np.allclose(base, b) for b in tried):
+            continue
+        tried.append(base)
         p.restoreState(saved, physicsClientId=client)
         robot = _start(model, body, base, qs, client)
         err = 0.0
-        for goal in goals:
-            err = max(err, robot.impedance_step(goal))
+        for goal, speed in zip(goals, speeds):
+            err = max(err, robot.impedance_step(goal, speed))
             p.stepSimulation(physicsClientId=client)
         if err < best_err:
             best, best_err = (base, qs), err
