@@ -197,3 +197,31 @@ def test_grasp_frames_for_every_handle(kind, monkeypatch):
             M = joint_transform(j.type, j.axis, j.origin, state[spec.parts[0].name])
             handle = M[:3, :3] @ np.asarray(j.handle["point"]) + M[:3, 3]
             assert np.linalg.norm(G[:3, 3] - handle) < 1e-9
+
+
+def test_a_part_the_robot_opened_is_added_from_its_path(capture_dir, tmp_path):
+    """Proposed as a slide and its type not searched: the robot's record of what it opened (a
+    run of the tool path that the slide does not explain) gives the door's part and hinge,
+    within the optimisation's targets on this small capture."""
+    import copy
+
+    from artgs.core.model import layout
+    from artgs.core.model.joints import Articulation, write_articulation
+    from artgs.core.model.ply import write_ply
+    from artgs.core.model.progress import QUIET
+    from artgs.core.model.registry import OptimiseOptions
+    from artgs.core.stages.optimise.stage import optimise
+
+    gt = read_articulation(capture_dir / "gt.json").joints
+    slide = copy.deepcopy(gt[0])
+    slide.type, slide.states = "prismatic", {}
+    slide.axis = -np.asarray(gt[0].handle["approach"], float)     # pulled towards the robot
+    out = tmp_path / "out"
+    out.mkdir()
+    capture = load_capture(capture_dir)
+    write_ply(out / layout.SPLAT, initial_splats(capture.static)[0])
+    write_articulation(out / layout.PROPOSALS, Articulation([slide], {"source": "test"}))
+    optimise(out, capture, QUIET, OptimiseOptions(iterations=120, types=False, robot_twin=True))
+    joints = read_articulation(out / layout.ARTICULATION).joints
+    s = match_joints(joints, gt)[0]
+    assert s.type_correct and s.axis_error_deg < 3.0 and s.origin_error_cm < 2.0, s

@@ -7,8 +7,10 @@ import numpy as np
 import torch
 
 from .fit import part_level, search_states
-from .hypotheses import (REMOVE_TOL, clearly_better, hidden_share, hinge_lines, key_time,
-                         moved_with, part_normal, part_points, score_at, state_candidates)
+from ...model.joints import joint_transform
+from .hypotheses import (REMOVE_TOL, circle_centre, clearly_better, hidden_share, hinge_lines,
+                         key_time, moved_with, part_normal, part_points, path_residual, score_at,
+                         state_candidates, tool_segments)
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot, unshaded
 from .plausible import HIDDEN_SHARE, little_motion, off_part
@@ -209,3 +211,158 @@ def drop_into_body(run, names: list[str]) -> list[str]:
             run.trust = torch.cat([run.trust[:k], run.trust[k + 1:]])
             dropped.append(name)
     return dropped
+
+# a joint explains a tool run when it carries the first grasp point along the run within this
+# share of the object's size (the grasp holds the handle within ~1 cm; a hinge 10 deg off at
+# half a metre strays ~5 cm over a quarter turn)
+TOOL_TOL = 0.05
+
+
+def tool_joint(path: np.ndarray, size: float) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """The joint of one run of tool positions ``path`` (M,3): a hinge (normal of the positions'
+    plane, through their circle's centre) when a circle explains them clearly better than a line,
+    else a slide along their principal direction; with its value at each position (rad / m, 0 at
+    the first)."""
+    c = path.mean(0)
+    _, _, vt = np.linalg.svd(path - c, full_matrices=False)
+    d = path - c
+    line = float(np.sqrt(np.mean(np.sum((d - np.outer(d @ vt[0], vt[0])) ** 2, 1))))
+    hinge = circle_centre(path, vt) if len(path) >= 3 else None
+    if hinge is not None and path_residual(path) < 0.5 * line and \
+            np.linalg.norm(hinge - c) < 10 * size:
+        xy = (path - hinge) @ vt[:2].T
+        angles = np.unwrap(np.arctan2(xy[:, 1], xy[:, 0]))
+        values = angles - angles[0]           # about vt[0] x vt[1], right-handed
+        normal = np.cross(vt[0], vt[1])
+        return (REVOLUTE, normal, hinge, values) if values[-1] >= 0 else \
+            (REVOLUTE, -normal, hinge, -values)
+    axis = vt[0] if (path[-1] - path[0]) @ vt[0] >= 0 else -vt[0]
+    return PRISMATIC, axis, path[0], (path - path[0]) @ axis
+
+
+def explains(model: ArticulatedSplat, k: int, times: list[int], path: np.ndarray,
+             tol: float) -> bool:
+    """Whether joint ``k``'s fitted motion carries the point ``path[0]`` (at ``times[0]``) along
+    ``path`` (one position per time of ``times``) within ``tol`` (m)."""
+    axes, origins = model.joint_lines()
+    values = model.joint_values(k)
+    kind = model.types[k]
+    start = np.linalg.inv(joint_transform(kind, axes[k], origins[k], values[times[0]]))
+    p0 = np.append(path[0], 1.0)
+    for t, p in zip(times, path):
+        moved = joint_transform(kind, axes[k], origins[k], values[t]) @ start @ p0
+        if np.linalg.norm(moved[:3] - p) > tol:
+            return False
+    return True
+
+
+def run_states(along: np.ndarray, ts: list[int], times: list[int]) -> list[np.ndarray]:
+    """Candidate states at ``times`` of a joint read off one tool run (values ``along`` at the
+    run's times ``ts``, 0 before, held after): as read, and with either end continued by its
+    neighbouring step, since a run's first position may be a step into the opening (the hand
+    grasped between two frames) and its last one a step short of it (the hand letting go). The
+    frames' depth chooses among them."""
+    starts = [0.0] if len(along) < 2 else [0.0, along[1] - along[0]]
+    ends = [along[-1]] if len(along) < 3 else [along[-1], 2 * along[-2] - along[-3]]
+    out = []
+    for shift in starts:
+        for end in ends:
+            v = along + shift
+            v[-1] = end + shift
+            values = np.zeros(len(times))
+            for t, x in zip(ts, v):
+                values[times.index(t)] = x
+            values[[i for i, t in enumerate(times) if t > ts[-1]]] = v[-1]
+            out.append(values)
+    return out
+
+
+def add_tool_parts(run, share: float) -> list[str]:
+    """Parts the robot was seen opening that no joint explains: each run of the tool path
+    (:func:`.hypotheses.tool_segments`: a hand holding one handle moves on a circle about its
+    hinge or a line along its slide) that no fitted joint carries the grasp point along
+    (:func:`explains`) gives a joint (:func:`tool_joint`; its states read off the path, 0
+    before the run and held after it, the run's ends continued or not as the depth below finds
+    more Gaussians: :func:`run_states`). Its part is chosen by the frames' depth
+    (:func:`.assign.depth_votes`): the Gaussians of the base, or of joints that explain no run,
+    that the frames contradict at least ``MARGIN`` frames less when this joint moves them, or
+    whose support less contradiction rises by ``MARGIN`` (a slide that moves a door into the
+    body hides it, and hidden is never contradicted); their connected group nearest the first
+    grasp point. It is fitted and kept as :func:`add_missed` keeps a part: when it
+    clearly lowers the image loss and moves plausibly. The robot's own record is the evidence
+    of which part moved and how; the motion route and the missed-part search see only pixels,
+    and lose a part the arm hides (a storage unit's two doors, proposed as one slide).
+    Returns the names of the added joints."""
+    from .assign import MARGIN, depth_votes
+
+    model, frames, cfg = run.model, run.frames, run.cfg
+    if not frames.tool:
+        return []
+    times = sorted(frames.tool)
+    path = np.array([frames.tool[t][:3, 3] for t in times])
+    means = model.splat.means.cpu().numpy().astype(float)
+    steps = max(run.options.iterations // 2, 1)
+    runs = tool_segments(path, 0.01 * model.size, 0.02 * model.size)
+    tol = TOOL_TOL * model.size
+    added: list[str] = []
+    for r, seg in enumerate(runs):
+        ts, P = [times[i] for i in seg], path[seg]
+        held = [[explains(model, k, [times[i] for i in q], path[q], tol) for q in runs]
+                for k in range(model.k)]
+        if any(h[r] for h in held):
+            continue
+        labels = model.labels()
+        free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not any(held[k])])
+        kind, axis, point, along = tool_joint(P, model.size)
+        with unshaded(model):
+            before_frames = run.evaluate()
+        kept = snapshot(model)
+        name = f"part_{len(model.names) + 1}"
+        while name in model.names:
+            name += "_"
+        seed = np.zeros(model.splat.n, bool)
+        seed[int(np.argmin(np.linalg.norm(means - P[0], axis=1)))] = True
+        k = model.add(name, kind, axis, point, seed)
+        run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
+        moves = np.zeros(0, int)
+        for values in run_states(along, ts, model.times):
+            model.set_type(k, kind, axis, point, values)
+            support, against = (x.cpu().numpy() for x in depth_votes(model, frames, cfg))
+            at = np.arange(model.splat.n), labels
+            here, net = against[at], support[at] - against[at]
+            these = np.flatnonzero(free & (support[:, k + 1] > 0) & (
+                (against[:, k + 1] <= here - MARGIN)
+                | (support[:, k + 1] - against[:, k + 1] >= net + MARGIN)))
+            if len(these) > len(moves):
+                moves, best = these, values
+        model.set_type(k, kind, axis, point, best)
+        groups = clusters(means[moves], max(10, model.splat.n // 100))
+        why = "the frames' depth gives it no part"
+        if groups:
+            near = min(groups, key=lambda g: float(np.linalg.norm(means[moves[g]] - P[0],
+                                                                   axis=1).min()))
+            part = labels.copy()
+            part[moves[near]] = k + 1
+            model.reassign_all(part)
+            run.run_fit(steps, f"new part {name} from the robot's path",
+                        share / max(len(runs), 1), free=[i == k for i in range(model.k)],
+                        coarse=cfg.coarse, coarse_level=part_level(model, frames, k))
+            with unshaded(model):
+                after_frames = run.evaluate()
+            gain = clearly_better(before_frames, after_frames, [])
+            why = (implausible(model, k) if gain else
+                   f"it does not lower the image loss clearly ({float(after_frames.mean()):.5f}"
+                   f" against {float(before_frames.mean()):.5f})")
+            run.progress.log(f"{name}: the robot's tool moved over {len(ts)} steps that no "
+                             f"joint explains; as a {kind} part of {len(near)} Gaussians the "
+                             f"image loss is {float(after_frames.mean()):.5f} (without "
+                             f"{float(before_frames.mean()):.5f})")
+        if why:
+            run.progress.log(f"{name}: not added from the robot's path, {why}")
+            model.drop(k)
+            run.trust = run.trust[:-1]
+            restore(model, kept)
+            model.reassign_all(labels)
+            continue
+        added.append(name)
+    return added

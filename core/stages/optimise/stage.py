@@ -221,6 +221,11 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
             search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
     trimmed = seen.trim_parts(run, locked=model.locked.tolist()) if options.parts else {}
     run.run_fit(n, "joints", 0.25, coarse=cfg.coarse)
+    # the robot's record of what it opened is evidence as a user's joint is: trusted alike
+    tooled = missed.add_tool_parts(run, share=0.0) if options.parts else []
+    for name in tooled:
+        user.add(name)
+        run.trust[model.names.index(name)] = USER_TRUST
 
     def fixed() -> list[bool]:
         """Per current joint: a trusted user joint or a locked one."""
@@ -247,6 +252,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if added and options.types:   # the new parts' types by the same evidence
         evidence.update(hypotheses.select_types(run, share=0.0,
                                                 fixed=[name not in added for name in model.names]))
+    added = [a for a in tooled if a in model.names] + added
     if added:                     # the new parts refined with the others, then tested again
         refine(run, n // 2, share=0.07)
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
