@@ -218,11 +218,29 @@ def drop_into_body(run, names: list[str]) -> list[str]:
 TOOL_TOL = 0.05
 
 
-def tool_joint(path: np.ndarray, size: float) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
-    """The joint of one run of tool positions ``path`` (M,3): a hinge (normal of the positions'
-    plane, through their circle's centre) when a circle explains them clearly better than a line,
-    else a slide along their principal direction; with its value at each position (rad / m, 0 at
-    the first)."""
+# a held tool turning by at least this much (rad) over a run turns with a hinge: a rigid grasp
+# turns with its part, by the part's own angle, and not at all on a slide
+TURNED = np.radians(5.0)
+
+
+def tool_joint(path: np.ndarray, size: float, turns: np.ndarray | None = None
+               ) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """The joint of one run of tool positions ``path`` (M,3); ``turns`` (M,3,3), when known, the
+    tool's rotation at each position relative to the first. A tool that turned by ``TURNED`` or
+    more turned with a hinge: its axis is the turn's, its line the points c with
+    p_i - c = R_i (p_0 - c) (least squares), exact for a rigid grasp however short the arc.
+    Else a hinge (normal of the positions' plane, through their circle's centre) when a circle
+    explains them clearly better than a line, else a slide along their principal direction.
+    With its value at each position (rad / m, 0 at the first)."""
+    from scipy.spatial.transform import Rotation
+
+    if turns is not None and len(path) >= 2:
+        rotvecs = Rotation.from_matrix(turns).as_rotvec()
+        if np.linalg.norm(rotvecs[-1]) >= TURNED:
+            u = rotvecs[-1] / np.linalg.norm(rotvecs[-1])
+            A = np.concatenate([np.eye(3) - R for R in turns[1:]])
+            b = np.concatenate([p - R @ path[0] for p, R in zip(path[1:], turns[1:])])
+            return REVOLUTE, u, np.linalg.lstsq(A, b, rcond=None)[0], rotvecs @ u
     c = path.mean(0)
     _, _, vt = np.linalg.svd(path - c, full_matrices=False)
     d = path - c
@@ -313,7 +331,9 @@ def add_tool_parts(run, share: float) -> list[str]:
             continue
         labels = model.labels()
         free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not any(held[k])])
-        kind, axis, point, along = tool_joint(P, model.size)
+        first = frames.tool[ts[0]][:3, :3]
+        turns = np.stack([frames.tool[t][:3, :3] @ first.T for t in ts])
+        kind, axis, point, along = tool_joint(P, model.size, turns)
         with unshaded(model):
             before_frames = run.evaluate()
         kept = snapshot(model)
