@@ -218,44 +218,86 @@ def drop_into_body(run, names: list[str]) -> list[str]:
 TOOL_TOL = 0.05
 
 
-# a held tool turning by at least this much (rad) over a run turns with a hinge: a rigid grasp
-# turns with its part, by the part's own angle, and not at all on a slide
+# a held tool whose approach turns by at least this much (rad) over a run turns with a hinge: a
+# grasp turns with its part, by the part's own angle, and not at all on a slide
 TURNED = np.radians(5.0)
 
 
-def tool_joint(path: np.ndarray, size: float, turns: np.ndarray | None = None
+def tool_joint(path: np.ndarray, size: float, approach: np.ndarray | None = None
                ) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
-    """The joint of one run of tool positions ``path`` (M,3); ``turns`` (M,3,3), when known, the
-    tool's rotation at each position relative to the first. A tool that turned by ``TURNED`` or
-    more turned with a hinge: its axis is the turn's, its line the points c with
-    p_i - c = R_i (p_0 - c) (least squares), exact for a rigid grasp however short the arc.
-    Else a hinge (normal of the positions' plane, through their circle's centre) when a circle
-    explains them clearly better than a line, else a slide along their principal direction.
-    With its value at each position (rad / m, 0 at the first)."""
-    from scipy.spatial.transform import Rotation
-
-    if turns is not None and len(path) >= 2:
-        rotvecs = Rotation.from_matrix(turns).as_rotvec()
-        if np.linalg.norm(rotvecs[-1]) >= TURNED:
-            u = rotvecs[-1] / np.linalg.norm(rotvecs[-1])
-            A = np.concatenate([np.eye(3) - R for R in turns[1:]])
-            b = np.concatenate([p - R @ path[0] for p, R in zip(path[1:], turns[1:])])
-            return REVOLUTE, u, np.linalg.lstsq(A, b, rcond=None)[0], rotvecs @ u
+    """The joint of one run of tool positions ``path`` (M,3), with its value at each position
+    (rad / m, 0 at the first). ``approach`` (M,3), when known, is the tool's approach direction
+    at each position: one that turned by ``TURNED`` or more turned with a hinge (the approach,
+    not the whole pose: a parallel gripper holds a handle alike turned half a turn about its
+    approach, and IK may pick either). Hinge candidates: the circle through the positions (axis
+    normal to their plane) and the approaches' turn (axis normal to it, values their angles
+    about it, line by least squares, :func:`_turn_hinge`; good however short the arc, but only
+    as good as the tool's orientation); the one that carries the first position along the path
+    more closely is kept. Without a turn, the circle when it explains the positions clearly
+    better than a line, else a slide along their principal direction."""
     c = path.mean(0)
     _, _, vt = np.linalg.svd(path - c, full_matrices=False)
     d = path - c
     line = float(np.sqrt(np.mean(np.sum((d - np.outer(d @ vt[0], vt[0])) ** 2, 1))))
-    hinge = circle_centre(path, vt) if len(path) >= 3 else None
-    if hinge is not None and path_residual(path) < 0.5 * line and \
-            np.linalg.norm(hinge - c) < 10 * size:
-        xy = (path - hinge) @ vt[:2].T
+    hinges = []
+    centre = circle_centre(path, vt) if len(path) >= 3 else None
+    if centre is not None and np.linalg.norm(centre - c) < 10 * size:
+        xy = (path - centre) @ vt[:2].T
         angles = np.unwrap(np.arctan2(xy[:, 1], xy[:, 0]))
         values = angles - angles[0]           # about vt[0] x vt[1], right-handed
-        normal = np.cross(vt[0], vt[1])
-        return (REVOLUTE, normal, hinge, values) if values[-1] >= 0 else \
-            (REVOLUTE, -normal, hinge, -values)
+        hinges.append((np.cross(vt[0], vt[1]), centre, values))
+    turned = approach is not None and len(path) >= 2 and _turn(approach) >= TURNED
+    if turned:
+        hinges.append(_turn_hinge(path, approach))
+    if hinges and (turned or path_residual(path) < 0.5 * line):
+        axis, point, values = min(hinges, key=lambda h: _carried(path, approach, *h))
+        k = int(np.argmax(np.abs(values)))
+        return (REVOLUTE, axis, point, values) if values[k] >= 0 else \
+            (REVOLUTE, -axis, point, -values)
     axis = vt[0] if (path[-1] - path[0]) @ vt[0] >= 0 else -vt[0]
     return PRISMATIC, axis, path[0], (path - path[0]) @ axis
+
+
+def _turn(approach: np.ndarray) -> float:
+    """Largest angle (rad) between the first approach direction and any later one."""
+    a = approach / np.linalg.norm(approach, axis=1, keepdims=True)
+    return float(np.arccos(np.clip(a[1:] @ a[0], -1.0, 1.0)).max())
+
+
+def _turn_hinge(path: np.ndarray, approach: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(axis, point, values) of the hinge the approaches turned about: the axis normal to the
+    first approach and the one most turned from it, the values the approaches' angles about it,
+    the line the points c with p_i - c = R(axis, value_i) (p_0 - c) in least squares."""
+    from ...model.joints import rotation_about_axis
+
+    a = approach / np.linalg.norm(approach, axis=1, keepdims=True)
+    u = np.cross(a[0], a[int(np.argmin(a @ a[0]))])
+    u /= np.linalg.norm(u)
+    flat = a - np.outer(a @ u, u)
+    values = np.arctan2(np.cross(flat[0], flat) @ u, flat @ flat[0])
+    turns = [rotation_about_axis(u, v) for v in values[1:]]
+    A = np.concatenate([np.eye(3) - R for R in turns])
+    b = np.concatenate([p - R @ path[0] for p, R in zip(path[1:], turns)])
+    return u, np.linalg.lstsq(A, b, rcond=None)[0], values
+
+
+def _carried(path: np.ndarray, approach: np.ndarray | None, axis: np.ndarray,
+             point: np.ndarray, values: np.ndarray) -> float:
+    """RMS distance (m) between the positions and the first one carried by the hinge, plus,
+    with ``approach``, the approaches' RMS difference from the first one carried alike, as a
+    distance at the handle's radius (a circle through noisy positions of a short arc fits them
+    closely with a wrong axis; the approaches then disagree)."""
+    Ms = [joint_transform(REVOLUTE, axis, point, v) for v in values]
+    moved = np.array([M[:3] @ np.append(path[0], 1.0) for M in Ms])
+    cost = float(np.sqrt(np.mean(np.sum((moved - path) ** 2, 1))))
+    if approach is None:
+        return cost
+    a = approach / np.linalg.norm(approach, axis=1, keepdims=True)
+    turned = np.array([M[:3, :3] @ a[0] for M in Ms])
+    rel = path[0] - point
+    radius = float(np.linalg.norm(rel - (rel @ axis) * axis))
+    return cost + radius * float(np.sqrt(np.mean(np.sum((turned - a) ** 2, 1))))
 
 
 def explains(model: ArticulatedSplat, k: int, times: list[int], path: np.ndarray,
@@ -331,9 +373,8 @@ def add_tool_parts(run, share: float) -> list[str]:
             continue
         labels = model.labels()
         free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not any(held[k])])
-        first = frames.tool[ts[0]][:3, :3]
-        turns = np.stack([frames.tool[t][:3, :3] @ first.T for t in ts])
-        kind, axis, point, along = tool_joint(P, model.size, turns)
+        approach = np.array([frames.tool[t][:3, 2] for t in ts])
+        kind, axis, point, along = tool_joint(P, model.size, approach)
         with unshaded(model):
             before_frames = run.evaluate()
         kept = snapshot(model)
