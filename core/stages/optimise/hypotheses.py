@@ -307,17 +307,23 @@ def path_residual(P: np.ndarray) -> float:
     closer); 0 for two positions."""
     if len(P) < 3:
         return 0.0
+    _, line, _, circle = line_and_circle(P)
+    return min(line, circle)
+
+
+def line_and_circle(P: np.ndarray) -> tuple[np.ndarray, float, np.ndarray | None, float]:
+    """The positions' principal axes (rows), their RMS distance (m) from their best line, the
+    centre of their circle in the plane of the first two axes (None when collinear) and their
+    RMS distance from that circle (inf without one). Three positions or more."""
     c = P.mean(0)
     _, _, vt = np.linalg.svd(P - c, full_matrices=False)
     d = P - c
     line = float(np.sqrt(np.mean(np.sum((d - np.outer(d @ vt[0], vt[0])) ** 2, 1))))
     hinge = circle_centre(P, vt)
     if hinge is None:
-        return line
-    xy = (P - hinge) @ vt[:2].T
-    r = np.linalg.norm(xy, axis=1)
-    circle = float(np.sqrt(np.mean((r - r.mean()) ** 2 + (d @ vt[2]) ** 2)))
-    return min(line, circle)
+        return vt, line, None, np.inf
+    r = np.linalg.norm((P - hinge) @ vt[:2].T, axis=1)
+    return vt, line, hinge, float(np.sqrt(np.mean((r - r.mean()) ** 2 + (d @ vt[2]) ** 2)))
 
 def circle_centre(path: np.ndarray, basis: np.ndarray) -> np.ndarray | None:
     """Centre of the circle through ``path`` (M,3) in the plane of ``basis``'s first two rows

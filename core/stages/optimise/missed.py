@@ -8,8 +8,8 @@ import torch
 
 from .fit import part_level, search_states
 from ...model.joints import joint_transform
-from .hypotheses import (REMOVE_TOL, circle_centre, clearly_better, hidden_share, hinge_lines,
-                         key_time, moved_with, part_normal, part_points, path_residual, score_at,
+from .hypotheses import (REMOVE_TOL, clearly_better, hidden_share, hinge_lines, key_time,
+                         line_and_circle, moved_with, part_normal, part_points, score_at,
                          state_candidates, tool_segments)
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot, unshaded
@@ -235,21 +235,23 @@ def tool_joint(path: np.ndarray, size: float, approach: np.ndarray | None = None
     as good as the tool's orientation); the one that carries the first position along the path
     more closely is kept. Without a turn, the circle when it explains the positions clearly
     better than a line, else a slide along their principal direction."""
-    c = path.mean(0)
-    _, _, vt = np.linalg.svd(path - c, full_matrices=False)
-    d = path - c
-    line = float(np.sqrt(np.mean(np.sum((d - np.outer(d @ vt[0], vt[0])) ** 2, 1))))
+    if len(path) >= 3:
+        vt, line, centre, circle = line_and_circle(path)
+    else:
+        vt = np.linalg.svd(path - path.mean(0), full_matrices=False)[2]
+        line, centre, circle = 0.0, None, np.inf
     hinges = []
-    centre = circle_centre(path, vt) if len(path) >= 3 else None
-    if centre is not None and np.linalg.norm(centre - c) < 10 * size:
+    if centre is not None and np.linalg.norm(centre - path.mean(0)) < 10 * size:
         xy = (path - centre) @ vt[:2].T
         angles = np.unwrap(np.arctan2(xy[:, 1], xy[:, 0]))
         values = angles - angles[0]           # about vt[0] x vt[1], right-handed
         hinges.append((np.cross(vt[0], vt[1]), centre, values))
+    if approach is not None:
+        approach = approach / np.linalg.norm(approach, axis=1, keepdims=True)
     turned = approach is not None and len(path) >= 2 and _turn(approach) >= TURNED
     if turned:
         hinges.append(_turn_hinge(path, approach))
-    if hinges and (turned or path_residual(path) < 0.5 * line):
+    if hinges and (turned or circle < 0.5 * line):
         axis, point, values = min(hinges, key=lambda h: _carried(path, approach, *h))
         k = int(np.argmax(np.abs(values)))
         return (REVOLUTE, axis, point, values) if values[k] >= 0 else \
@@ -259,22 +261,20 @@ def tool_joint(path: np.ndarray, size: float, approach: np.ndarray | None = None
 
 
 def _turn(approach: np.ndarray) -> float:
-    """Largest angle (rad) between the first approach direction and any later one."""
-    a = approach / np.linalg.norm(approach, axis=1, keepdims=True)
-    return float(np.arccos(np.clip(a[1:] @ a[0], -1.0, 1.0)).max())
+    """Largest angle (rad) between the first (unit) approach direction and any later one."""
+    return float(np.arccos(np.clip(approach[1:] @ approach[0], -1.0, 1.0)).max())
 
 
 def _turn_hinge(path: np.ndarray, approach: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(axis, point, values) of the hinge the approaches turned about: the axis normal to the
-    first approach and the one most turned from it, the values the approaches' angles about it,
-    the line the points c with p_i - c = R(axis, value_i) (p_0 - c) in least squares."""
+    """(axis, point, values) of the hinge the (unit) approaches turned about: the axis normal to
+    the first approach and the one most turned from it, the values the approaches' angles about
+    it, the line the points c with p_i - c = R(axis, value_i) (p_0 - c) in least squares."""
     from ...model.joints import rotation_about_axis
 
-    a = approach / np.linalg.norm(approach, axis=1, keepdims=True)
-    u = np.cross(a[0], a[int(np.argmin(a @ a[0]))])
+    u = np.cross(approach[0], approach[int(np.argmin(approach @ approach[0]))])
     u /= np.linalg.norm(u)
-    flat = a - np.outer(a @ u, u)
+    flat = approach - np.outer(approach @ u, u)
     values = np.arctan2(np.cross(flat[0], flat) @ u, flat @ flat[0])
     turns = [rotation_about_axis(u, v) for v in values[1:]]
     A = np.concatenate([np.eye(3) - R for R in turns])
@@ -285,19 +285,18 @@ def _turn_hinge(path: np.ndarray, approach: np.ndarray
 def _carried(path: np.ndarray, approach: np.ndarray | None, axis: np.ndarray,
              point: np.ndarray, values: np.ndarray) -> float:
     """RMS distance (m) between the positions and the first one carried by the hinge, plus,
-    with ``approach``, the approaches' RMS difference from the first one carried alike, as a
-    distance at the handle's radius (a circle through noisy positions of a short arc fits them
+    with (unit) ``approach``, the approaches' RMS difference from the first one carried alike,
+    as a distance at the handle's radius (a circle through noisy positions of a short arc fits them
     closely with a wrong axis; the approaches then disagree)."""
     Ms = [joint_transform(REVOLUTE, axis, point, v) for v in values]
     moved = np.array([M[:3] @ np.append(path[0], 1.0) for M in Ms])
     cost = float(np.sqrt(np.mean(np.sum((moved - path) ** 2, 1))))
     if approach is None:
         return cost
-    a = approach / np.linalg.norm(approach, axis=1, keepdims=True)
-    turned = np.array([M[:3, :3] @ a[0] for M in Ms])
+    turned = np.array([M[:3, :3] @ approach[0] for M in Ms])
     rel = path[0] - point
     radius = float(np.linalg.norm(rel - (rel @ axis) * axis))
-    return cost + radius * float(np.sqrt(np.mean(np.sum((turned - a) ** 2, 1))))
+    return cost + radius * float(np.sqrt(np.mean(np.sum((turned - approach) ** 2, 1))))
 
 
 def explains(model: ArticulatedSplat, k: int, times: list[int], path: np.ndarray,
@@ -385,8 +384,9 @@ def add_tool_parts(run, share: float) -> list[str]:
         seed[int(np.argmin(np.linalg.norm(means - P[0], axis=1)))] = True
         k = model.add(name, kind, axis, point, seed)
         run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
-        moves = np.zeros(0, int)
-        for values in run_states(along, ts, model.times):
+        candidates = run_states(along, ts, model.times)
+        moves, best = np.zeros(0, int), candidates[0]
+        for values in candidates:
             model.set_type(k, kind, axis, point, values)
             support, against = (x.cpu().numpy() for x in depth_votes(model, frames, cfg))
             at = np.arange(model.splat.n), labels
