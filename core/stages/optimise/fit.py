@@ -43,6 +43,8 @@ class FitConfig:
     lambda_entropy: float = 0.02       # low entropy: parts are rigid
     lambda_temporal: float = 0.02      # squared state change between consecutive times
     lambda_prior: float = 0.0          # pull towards the start, x per-joint trust
+    lambda_tool: float = 0.1           # the robot's tool path (model.held_loss)
+    sigma_tool: float = 1.0            # its scale, x 1 % of the object size
     lr_axes: float = 0.01
     lr_origins: float = 0.004          # x object size
     lr_states: float = 0.01
@@ -164,6 +166,8 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
             + cfg.lambda_temporal * model.temporal()
         if prior is not None and cfg.lambda_prior:
             loss = loss + cfg.lambda_prior * model.prior(prior)
+        if model.held and cfg.lambda_tool:
+            loss = loss + cfg.lambda_tool * model.held_loss(cfg.sigma_tool * 0.01 * size)
         if model.shading:
             loss = loss + cfg.lambda_gain * model.gain_prior()
         if model.refine_cameras:

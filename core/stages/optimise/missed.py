@@ -299,20 +299,16 @@ def _carried(path: np.ndarray, approach: np.ndarray | None, axis: np.ndarray,
     return cost + radius * float(np.sqrt(np.mean(np.sum((turned - approach) ** 2, 1))))
 
 
-def explains(model: ArticulatedSplat, k: int, times: list[int], path: np.ndarray,
-             tol: float) -> bool:
-    """Whether joint ``k``'s fitted motion carries the point ``path[0]`` (at ``times[0]``) along
-    ``path`` (one position per time of ``times``) within ``tol`` (m)."""
+def carry_error(model: ArticulatedSplat, k: int, times: list[int], path: np.ndarray) -> float:
+    """Largest distance (m) between ``path`` (one position per time of ``times``) and its first
+    point carried along by joint ``k``'s fitted motion from ``times[0]``."""
     axes, origins = model.joint_lines()
     values = model.joint_values(k)
     kind = model.types[k]
     start = np.linalg.inv(joint_transform(kind, axes[k], origins[k], values[times[0]]))
     p0 = np.append(path[0], 1.0)
-    for t, p in zip(times, path):
-        moved = joint_transform(kind, axes[k], origins[k], values[t]) @ start @ p0
-        if np.linalg.norm(moved[:3] - p) > tol:
-            return False
-    return True
+    return max(float(np.linalg.norm((joint_transform(kind, axes[k], origins[k], values[t])
+                                     @ start @ p0)[:3] - p)) for t, p in zip(times, path))
 
 
 def run_states(along: np.ndarray, ts: list[int], times: list[int]) -> list[np.ndarray]:
@@ -340,7 +336,8 @@ def add_tool_parts(run, share: float) -> list[str]:
     """Parts the robot was seen opening that no joint explains: each run of the tool path
     (:func:`.hypotheses.tool_segments`: a hand holding one handle moves on a circle about its
     hinge or a line along its slide) that no fitted joint carries the grasp point along
-    (:func:`explains`) gives a joint (:func:`tool_joint`; its states read off the path, 0
+    (:func:`carry_error` within ``TOOL_TOL``; a run a joint does explain is held by
+    the one that explains it best, :meth:`.model.ArticulatedSplat.hold`) gives a joint (:func:`tool_joint`; its states read off the path, 0
     before the run and held after it, the run's ends continued or not as the depth below finds
     more Gaussians: :func:`run_states`). Its part is chosen by the frames' depth
     (:func:`.assign.depth_votes`): the Gaussians of the base, or of joints that explain no run,
@@ -366,12 +363,15 @@ def add_tool_parts(run, share: float) -> list[str]:
     added: list[str] = []
     for r, seg in enumerate(runs):
         ts, P = [times[i] for i in seg], path[seg]
-        held = [[explains(model, k, [times[i] for i in q], path[q], tol) for q in runs]
-                for k in range(model.k)]
-        if any(h[r] for h in held):
+        errors = np.array([[carry_error(model, k, [times[i] for i in q], path[q]) for q in runs]
+                           for k in range(model.k)]).reshape(model.k, len(runs))
+        held = errors <= tol
+        if held[:, r].any():
+            holder = int(np.argmin(errors[:, r]))
+            model.hold(model.names[holder], [model.times.index(t) for t in ts], P)
             continue
         labels = model.labels()
-        free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not any(held[k])])
+        free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not held[k].any()])
         approach = np.array([frames.tool[t][:3, 2] for t in ts])
         kind, axis, point, along = tool_joint(P, model.size, approach)
         with unshaded(model):
@@ -383,6 +383,7 @@ def add_tool_parts(run, share: float) -> list[str]:
         seed = np.zeros(model.splat.n, bool)
         seed[int(np.argmin(np.linalg.norm(means - P[0], axis=1)))] = True
         k = model.add(name, kind, axis, point, seed)
+        model.hold(name, [model.times.index(t) for t in ts], P)
         run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
         candidates = run_states(along, ts, model.times)
         moves, best = np.zeros(0, int), candidates[0]

@@ -122,6 +122,9 @@ class ArticulatedSplat:
         # Gaussians drawn fully transparent (:func:`vanished`); part of :meth:`state`, so a
         # helper process renders them so too
         self.transparent: torch.Tensor | None = None
+        #: per joint name, the runs of the robot's tool path its part was held along
+        #: (:meth:`held_loss`): (time indices, tool positions (M,3)) pairs
+        self.held: dict[str, list[tuple[torch.Tensor, torch.Tensor]]] = {}
         tree = cKDTree(splat.means.cpu().numpy())
         k = min(knn + 1, splat.n)
         self.neighbours = torch.as_tensor(tree.query(splat.means.cpu().numpy(), k)[1][:, 1:],
@@ -335,6 +338,47 @@ class ArticulatedSplat:
         s = self.states * self.moving
         return ((s[:, 1:] - s[:, :-1]) ** 2).mean()
 
+    def hold(self, name: str, ti: list[int], positions: np.ndarray) -> None:
+        """Record that joint ``name``'s part was held by the robot's tool at ``positions``
+        (M,3) at time indices ``ti`` (:attr:`held`)."""
+        f = dict(dtype=torch.float32, device=self.axes.device)
+        self.held.setdefault(name, []).append(
+            (torch.as_tensor(ti, device=self.axes.device),
+             torch.as_tensor(np.asarray(positions, float), **f)))
+
+    def held_back(self, k: int) -> list[torch.Tensor]:
+        """Per run joint ``k``'s part was held along (:attr:`held`), its tool positions carried
+        back to the closed pose by the joint's motion at their times (M,3): a rigid grasp
+        carries back to one point."""
+        axes, origins = self.joint_axes()[k], self.joint_origins()[k]
+        out = []
+        for ti, P in self.held.get(self.names[k], ()):
+            m = len(ti)
+            values = self.states[k, ti] * self.moving[ti] * self.unit_of(self.types[k])
+            R, t, _ = joint_motions([self.types[k]] * m, axes.expand(m, 3), origins.expand(m, 3),
+                                    values)
+            out.append(torch.einsum("mji,mj->mi", R, P - t))          # R^T (p - t)
+        return out
+
+    def held_loss(self, sigma: float) -> torch.Tensor:
+        """How far the joints' motions are from the tool positions their parts were held at:
+        per run, the spread of :meth:`held_back`'s points about their mean, robustly (Cauchy,
+        scale ``sigma`` m: a grasp that slipped at a few times cannot pull the joint), mean
+        over the run, summed over the runs."""
+        terms = [torch.log1p(((b - b.mean(0)) ** 2).sum(-1) / sigma ** 2).mean()
+                 for k in range(self.k) for b in self.held_back(k)]
+        return torch.stack(terms).sum() if terms else torch.zeros((), device=self.axes.device)
+
+    @torch.no_grad()
+    def held_residual(self, k: int) -> float | None:
+        """RMS distance (m) of :meth:`held_back`'s points from their run's mean; None when
+        joint ``k`` holds no run."""
+        backs = self.held_back(k)
+        if not backs:
+            return None
+        sq = torch.cat([((b - b.mean(0)) ** 2).sum(-1) for b in backs])
+        return float(sq.mean().sqrt())
+
     def prior(self, strength: torch.Tensor) -> torch.Tensor:
         """Pull towards the start (``strength`` (K,) per joint): 1 − |cos| of the axes plus the
         squared distance of the start's point from the axis line, in object sizes."""
@@ -411,6 +455,7 @@ class ArticulatedSplat:
                 h[self.hard == k + 1] = 0
                 h[self.hard > k + 1] -= 1
                 self.hard = h
+        self.held.pop(self.names[k], None)
         del self.names[k], self.types[k]
 
     def add(self, name: str, kind: str, axis: np.ndarray, origin: np.ndarray,

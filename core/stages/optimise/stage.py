@@ -400,6 +400,9 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
         extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
                      evidence=ev, warnings=warnings, into_body=round(inside, 4))
         extra.update({key: r[name] for key, r in (reports or {}).items() if name in r})
+        held = model.held_residual(k)
+        if held is not None:       # how closely the joint follows the robot's tool (m)
+            extra["tool_path_rms"] = round(held, 6)
         result.append(Joint(
             name=name, type=kind, axis=axis, origin=origin, limit=(lo, hi),
             parent=src.parent if src else "base", child=src.child if src else f"{name}_link",
