@@ -45,6 +45,7 @@ class FitConfig:
     lambda_prior: float = 0.0          # pull towards the start, x per-joint trust
     lambda_tool: float = 0.1           # the robot's tool path (model.held_loss)
     sigma_tool: float = 1.0            # its scale, x 1 % of the object size
+    lever_tool: float = 0.5            # its approaches' lever, x the object size
     lr_axes: float = 0.01
     lr_origins: float = 0.004          # x object size
     lr_states: float = 0.01
@@ -167,7 +168,8 @@ def fit(model: ArticulatedSplat, frames: FrameSet, cfg: FitConfig, steps: int,
         if prior is not None and cfg.lambda_prior:
             loss = loss + cfg.lambda_prior * model.prior(prior)
         if model.held and cfg.lambda_tool:
-            loss = loss + cfg.lambda_tool * model.held_loss(cfg.sigma_tool * 0.01 * size)
+            loss = loss + cfg.lambda_tool * model.held_loss(cfg.sigma_tool * 0.01 * size,
+                                                          cfg.lever_tool * size)
         if model.shading:
             loss = loss + cfg.lambda_gain * model.gain_prior()
         if model.refine_cameras:

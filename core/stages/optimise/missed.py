@@ -363,16 +363,16 @@ def add_tool_parts(run, share: float) -> list[str]:
     added: list[str] = []
     for r, seg in enumerate(runs):
         ts, P = [times[i] for i in seg], path[seg]
+        approach = np.array([frames.tool[t][:3, 2] for t in ts])
         errors = np.array([[carry_error(model, k, [times[i] for i in q], path[q]) for q in runs]
                            for k in range(model.k)]).reshape(model.k, len(runs))
         held = errors <= tol
         if held[:, r].any():
             holder = int(np.argmin(errors[:, r]))
-            model.hold(model.names[holder], [model.times.index(t) for t in ts], P)
+            model.hold(model.names[holder], [model.times.index(t) for t in ts], P, approach)
             continue
         labels = model.labels()
         free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not held[k].any()])
-        approach = np.array([frames.tool[t][:3, 2] for t in ts])
         kind, axis, point, along = tool_joint(P, model.size, approach)
         with unshaded(model):
             before_frames = run.evaluate()
@@ -383,7 +383,7 @@ def add_tool_parts(run, share: float) -> list[str]:
         seed = np.zeros(model.splat.n, bool)
         seed[int(np.argmin(np.linalg.norm(means - P[0], axis=1)))] = True
         k = model.add(name, kind, axis, point, seed)
-        model.hold(name, [model.times.index(t) for t in ts], P)
+        model.hold(name, [model.times.index(t) for t in ts], P, approach)
         run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
         candidates = run_states(along, ts, model.times)
         moves, best = np.zeros(0, int), candidates[0]

@@ -338,35 +338,49 @@ class ArticulatedSplat:
         s = self.states * self.moving
         return ((s[:, 1:] - s[:, :-1]) ** 2).mean()
 
-    def hold(self, name: str, ti: list[int], positions: np.ndarray) -> None:
+    def hold(self, name: str, ti: list[int], positions: np.ndarray,
+             approaches: np.ndarray | None = None) -> None:
         """Record that joint ``name``'s part was held by the robot's tool at ``positions``
-        (M,3) at time indices ``ti`` (:attr:`held`)."""
+        (M,3), with the tool's approach directions ``approaches`` (M,3) when known, at time
+        indices ``ti`` (:attr:`held`)."""
         f = dict(dtype=torch.float32, device=self.axes.device)
+        if approaches is not None:
+            approaches = np.asarray(approaches, float)
+            approaches = approaches / np.linalg.norm(approaches, axis=1, keepdims=True)
         self.held.setdefault(name, []).append(
             (torch.as_tensor(ti, device=self.axes.device),
-             torch.as_tensor(np.asarray(positions, float), **f)))
+             torch.as_tensor(np.asarray(positions, float), **f),
+             None if approaches is None else torch.as_tensor(approaches, **f)))
 
-    def held_back(self, k: int) -> list[torch.Tensor]:
-        """Per run joint ``k``'s part was held along (:attr:`held`), its tool positions carried
-        back to the closed pose by the joint's motion at their times (M,3): a rigid grasp
-        carries back to one point."""
+    def held_back(self, k: int) -> list[tuple[torch.Tensor, torch.Tensor | None]]:
+        """Per run joint ``k``'s part was held along (:attr:`held`), its tool positions (M,3)
+        and approaches (M,3, or None) carried back to the closed pose by the joint's motion at
+        their times: a rigid grasp carries back to one point and one approach."""
         axes, origins = self.joint_axes()[k], self.joint_origins()[k]
         out = []
-        for ti, P in self.held.get(self.names[k], ()):
+        for ti, P, A in self.held.get(self.names[k], ()):
             m = len(ti)
             values = self.states[k, ti] * self.moving[ti] * self.unit_of(self.types[k])
             R, t, _ = joint_motions([self.types[k]] * m, axes.expand(m, 3), origins.expand(m, 3),
                                     values)
-            out.append(torch.einsum("mji,mj->mi", R, P - t))          # R^T (p - t)
+            out.append((torch.einsum("mji,mj->mi", R, P - t),               # R^T (p - t)
+                        None if A is None else torch.einsum("mji,mj->mi", R, A)))
         return out
 
-    def held_loss(self, sigma: float) -> torch.Tensor:
-        """How far the joints' motions are from the tool positions their parts were held at:
-        per run, the spread of :meth:`held_back`'s points about their mean, robustly (Cauchy,
-        scale ``sigma`` m: a grasp that slipped at a few times cannot pull the joint), mean
-        over the run, summed over the runs."""
-        terms = [torch.log1p(((b - b.mean(0)) ** 2).sum(-1) / sigma ** 2).mean()
-                 for k in range(self.k) for b in self.held_back(k)]
+    def held_loss(self, sigma: float, lever: float) -> torch.Tensor:
+        """How far the joints' motions are from the robot's tool that held their parts: per run,
+        the spread of :meth:`held_back`'s points about their mean plus that of its approaches
+        as a distance at ``lever`` m (on a short arc the positions alone leave the hinge's
+        radius free, traded against the angles; the hand turns by the angle itself), robustly
+        (Cauchy, scale ``sigma`` m: a grasp that slipped at a few times cannot pull the
+        joint), mean over the run, summed over the runs."""
+        terms = []
+        for k in range(self.k):
+            for p, a in self.held_back(k):
+                d2 = ((p - p.mean(0)) ** 2).sum(-1)
+                if a is not None:
+                    d2 = d2 + lever ** 2 * ((a - a.mean(0)) ** 2).sum(-1)
+                terms.append(torch.log1p(d2 / sigma ** 2).mean())
         return torch.stack(terms).sum() if terms else torch.zeros((), device=self.axes.device)
 
     @torch.no_grad()
@@ -376,7 +390,7 @@ class ArticulatedSplat:
         backs = self.held_back(k)
         if not backs:
             return None
-        sq = torch.cat([((b - b.mean(0)) ** 2).sum(-1) for b in backs])
+        sq = torch.cat([((p - p.mean(0)) ** 2).sum(-1) for p, _ in backs])
         return float(sq.mean().sqrt())
 
     def prior(self, strength: torch.Tensor) -> torch.Tensor:
