@@ -114,6 +114,7 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
         elif (front := front_face(pts, new.axis, model.size)) is not None:
             new, _ = snap_to_front(new, front, mc.front_snap_deg)   # as the motion route
         here = float(run.evaluate(0, ids).mean())
+        path = model.held_residual(k)
         kept = snapshot(model)
         sign = 1.0 if new.axis @ axis >= 0 else -1.0    # refine_joint may flip axis and values
         refined = {t: sign * v for t, v in values.items()}
@@ -125,6 +126,7 @@ def refine_on_depth(run, capture: Capture, arrays, config: MotionConfig | None =
             if model.types[k] == REVOLUTE else 0.0
         small = turn <= MAX_TURN and shift <= MAX_SHIFT * model.size
         keep = there <= here * (1 + REMOVE_TOL) if small else there < here * (1 - REMOVE_TOL)
+        keep = keep and not model.leaves_path(k, path)
         if not keep:
             restore(model, kept)
         report[model.names[k]] = {"loss_before": round(here, 6), "loss_after": round(there, 6),

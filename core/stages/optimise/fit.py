@@ -45,7 +45,7 @@ class FitConfig:
     lambda_prior: float = 0.0          # pull towards the start, x per-joint trust
     lambda_tool: float = 0.1           # the robot's tool path (model.held_loss)
     sigma_tool: float = 1.0            # its scale, x 1 % of the object size
-    lever_tool: float = 0.5            # its approaches' lever, x the object size
+    lever_tool: float = 0.2            # the lever of its hand turns, x the object size
     lr_axes: float = 0.01
     lr_origins: float = 0.004          # x object size
     lr_states: float = 0.01

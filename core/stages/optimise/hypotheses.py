@@ -23,7 +23,7 @@ from ...geometry.rectangle import smallest_rectangle
 from ...geometry.rigid import JointFit, fit_both, kabsch
 from .fit import part_level, score_level, search_states, skip_draws
 from .kinematics import PRISMATIC, REVOLUTE
-from .model import ArticulatedSplat, restore, snapshot, unshaded, vanished
+from .model import ArticulatedSplat, farther, restore, snapshot, unshaded, vanished
 from .plausible import HIDDEN_SHARE, box_span, into_body
 from .seen import seen_moving
 
@@ -446,6 +446,7 @@ def select_types(run, share: float, fixed: list[bool]) -> dict[str, dict[str, An
             restore(model, kept)
         for pair in (turned[i:i + 2] for i in range(0, len(turned), 2)):
             fitted += in_turn(run, refit, pair, steps)
+        fitted = on_path(model, k, fitted, kept)
         allowed = into_space(fitted)
         losses = {t: min(float(f[0].mean()) for f in allowed if f[2] == t)
                   for t in dict.fromkeys(f[2] for f in allowed)}
@@ -463,6 +464,21 @@ def select_types(run, share: float, fixed: list[bool]) -> dict[str, dict[str, An
                          " (image loss " + ", ".join(f"{v:.4f} {t}" for t, v in losses.items())
                          + ")")
     return evidence
+
+def on_path(model, k: int, fitted: list[tuple], kept: tuple) -> list[tuple]:
+    """Of joint ``k``'s ``fitted`` hypotheses (tuples whose second item is a :func:`snapshot`),
+    those that carry the robot's tool positions the joint held nearly as well as the best of
+    them (:meth:`.model.ArticulatedSplat.leaves_path`); all when it held none. Leaves the
+    model at ``kept``."""
+    paths = []
+    for f in fitted:
+        restore(model, f[1])
+        paths.append(model.held_residual(k))
+    restore(model, kept)
+    if paths[0] is None:
+        return fitted
+    return [f for f, p in zip(fitted, paths) if not farther(p, min(paths), model.size)]
+
 
 def score_hypotheses(run, k: int, key: int, hyps: list[tuple]) -> list[float]:
     """Per hypothesis ``(type, axis, point, values or None)`` of joint ``k``: its lowest image
@@ -938,6 +954,7 @@ def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
         if not ids:
             continue
         fitted = snapshot(model)
+        path = model.held_residual(k)
         here = float(run.evaluate(0, ids).mean())
         with torch.no_grad():
             model.axes = model.axes.clone()
@@ -948,7 +965,8 @@ def keep_better_start(run, start_axes: np.ndarray, start_origins: np.ndarray,
             model.axes[k] = a
             model.origins[k] = torch.as_tensor(start_origins[s], dtype=torch.float32)
         there = float(run.evaluate(0, ids).mean())
-        if there < here * (1 + REMOVE_TOL):   # the frames cannot tell them apart: the start
+        if there < here * (1 + REMOVE_TOL) and not model.leaves_path(k, path):
+            # the frames cannot tell them apart (nor the robot's tool): the start
             kept.append(model.names[k])
             run.progress.log(f"{model.names[k]}: the start explains the frames better "
                              f"({there:.5f} < {here:.5f}); kept")

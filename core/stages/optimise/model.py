@@ -26,6 +26,7 @@ from .kinematics import (PRISMATIC, REVOLUTE, joint_motions, part_members, quat_
                          skin, skin_rigid)
 
 HARD_LOGIT = 8.0    # logit of a hardened / box-assigned part (weight ~0.999 with 2 parts)
+HELD_SLACK = 0.005  # x object size: what :meth:`ArticulatedSplat.leaves_path` lets pass
 
 
 def hard_logits(labels: torch.Tensor, parts: int) -> torch.Tensor:
@@ -353,9 +354,13 @@ class ArticulatedSplat:
              None if approaches is None else torch.as_tensor(approaches, **f)))
 
     def held_back(self, k: int) -> list[tuple[torch.Tensor, torch.Tensor | None]]:
-        """Per run joint ``k``'s part was held along (:attr:`held`), its tool positions (M,3)
-        and approaches (M,3, or None) carried back to the closed pose by the joint's motion at
-        their times: a rigid grasp carries back to one point and one approach."""
+        """Per run joint ``k``'s part was held along (:attr:`held`): its tool positions carried
+        back to the closed pose by the joint's motion at their times (M,3; a rigid grasp
+        carries back to one point), and with approaches known, how much more or less the hand
+        turned from the run's first approach than the joint turns it (M, chord lengths on the
+        unit sphere). The turn's size, not its direction: an arm's IK trades a degree of the
+        hand's orientation for reach, which on a short arc tilts a hinge fitted to the
+        directions by degrees, while the size pins the angles."""
         axes, origins = self.joint_axes()[k], self.joint_origins()[k]
         out = []
         for ti, P, A in self.held.get(self.names[k], ()):
@@ -363,23 +368,28 @@ class ArticulatedSplat:
             values = self.states[k, ti] * self.moving[ti] * self.unit_of(self.types[k])
             R, t, _ = joint_motions([self.types[k]] * m, axes.expand(m, 3), origins.expand(m, 3),
                                     values)
-            out.append((torch.einsum("mji,mj->mi", R, P - t),               # R^T (p - t)
-                        None if A is None else torch.einsum("mji,mj->mi", R, A)))
+            back = torch.einsum("mji,mj->mi", R, P - t)                    # R^T (p - t)
+            turn = None
+            if A is not None:
+                carried = R @ (R[0].T @ A[0])                              # A[0] turned alike
+                chord = lambda x: ((x - A[0]) ** 2).sum(-1).add(1e-12).sqrt()   # noqa: E731
+                turn = chord(A) - chord(carried)
+            out.append((back, turn))
         return out
 
     def held_loss(self, sigma: float, lever: float) -> torch.Tensor:
         """How far the joints' motions are from the robot's tool that held their parts: per run,
-        the spread of :meth:`held_back`'s points about their mean plus that of its approaches
-        as a distance at ``lever`` m (on a short arc the positions alone leave the hinge's
-        radius free, traded against the angles; the hand turns by the angle itself), robustly
-        (Cauchy, scale ``sigma`` m: a grasp that slipped at a few times cannot pull the
-        joint), mean over the run, summed over the runs."""
+        the spread of :meth:`held_back`'s points about their mean plus its turn differences as
+        a distance at ``lever`` m (on a short arc the positions alone leave the hinge's radius
+        free, traded against the angles), robustly (Cauchy, scale ``sigma`` m: a grasp that
+        slipped at a few times cannot pull the joint), mean over the run, summed over the
+        runs."""
         terms = []
         for k in range(self.k):
-            for p, a in self.held_back(k):
+            for p, turn in self.held_back(k):
                 d2 = ((p - p.mean(0)) ** 2).sum(-1)
-                if a is not None:
-                    d2 = d2 + lever ** 2 * ((a - a.mean(0)) ** 2).sum(-1)
+                if turn is not None:
+                    d2 = d2 + (lever * turn) ** 2
                 terms.append(torch.log1p(d2 / sigma ** 2).mean())
         return torch.stack(terms).sum() if terms else torch.zeros((), device=self.axes.device)
 
@@ -392,6 +402,14 @@ class ArticulatedSplat:
             return None
         sq = torch.cat([((p - p.mean(0)) ** 2).sum(-1) for p, _ in backs])
         return float(sq.mean().sqrt())
+
+    def leaves_path(self, k: int, before: float | None) -> bool:
+        """Whether joint ``k`` now carries its held tool positions clearly worse than
+        ``before`` (its :meth:`held_residual` then): farther by more than ``HELD_SLACK`` of the
+        object's size. Steps that decide by the image loss alone (the start kept, the depth's
+        last decimals, the body's box) must not trade what the robot measured for a tie of
+        the image loss."""
+        return farther(self.held_residual(k), before, self.size)
 
     def prior(self, strength: torch.Tensor) -> torch.Tensor:
         """Pull towards the start (``strength`` (K,) per joint): 1 − |cos| of the axes plus the
@@ -499,6 +517,12 @@ class ArticulatedSplat:
         self.names.append(name)
         self.types.append(kind)
         return self.k - 1
+
+
+def farther(now: float | None, before: float | None, size: float) -> bool:
+    """Whether a :meth:`ArticulatedSplat.held_residual` ``now`` is farther than ``before`` by
+    more than ``HELD_SLACK`` of the object's ``size`` (False when either is None)."""
+    return now is not None and before is not None and now > before + HELD_SLACK * size
 
 
 @contextmanager

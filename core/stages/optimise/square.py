@@ -80,7 +80,7 @@ def square_to_body(run, capture: Capture, fixed: list[bool], steps: int
         draws = run.rng.bit_generator.state
         centre = part_points(model, k).mean(0)    # the line turns about its point nearest the part
         point = origin + ((centre - origin) @ axis) * axis if model.types[k] == REVOLUTE else origin
-        losses, states = [], []
+        losses, states, paths = [], [], []
         for direction in (axis, target):
             restore(model, fitted)
             run.rng.bit_generator.state = draws
@@ -91,9 +91,11 @@ def square_to_body(run, capture: Capture, fixed: list[bool], steps: int
                         hold=("axes", "gains"))
             losses.append(run.evaluate(0, ids))
             states.append(snapshot(model))
+            paths.append(model.held_residual(k))
         t = paired_t(losses[1] - losses[0])
         rise = float(losses[1].mean() / losses[0].mean()) - 1.0
-        worse = rise > CLEARLY_WORSE or (rise > REMOVE_TOL and t > SIGNIFICANT)
+        worse = rise > CLEARLY_WORSE or (rise > REMOVE_TOL and t > SIGNIFICANT) \
+            or model.leaves_path(k, paths[0])
         restore(model, fitted if worse else states[1])
         fit, squared = float(losses[0].mean()), float(losses[1].mean())
         report[model.names[k]] = {"turned_deg": round(turn, 3), "loss_fit": round(fit, 6),
