@@ -151,10 +151,11 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         restore(model, tuple(part[:-1] for part in fitted))    # every joint's but the last
     return added
 
-def implausible(model: ArticulatedSplat, k: int) -> str | None:
+def implausible(model: ArticulatedSplat, k: int, measured: bool = False) -> str | None:
     """Why fitted joint ``k`` is no part to invent, or None: it barely moves
     (:func:`.plausible.little_motion`: a part that turns half the object by half a degree
-    absorbs small registration errors), or its hinge passes off its part
+    absorbs small registration errors), or, unless its line was ``measured`` (read off the
+    robot's path, which the hand's turn confirms), its hinge passes off its part
     (:func:`hinge_off_part`: a wide circle mimics another motion). Whether it moves into the
     body is asked only of its final fit (:func:`drop_into_body`): a first fit's part holds
     more than the part, and a door found from no proposal went 98-100 % into the body there."""
@@ -165,7 +166,7 @@ def implausible(model: ArticulatedSplat, k: int) -> str | None:
     if little_motion(kind, span, part_points(model, k, limit=model.splat.n), axes[k], origins[k]):
         unit = "rad" if kind == REVOLUTE else "m"
         return f"it barely moves ({span:.3f} {unit}): an invented part must move visibly"
-    if hinge_off_part(model, k):
+    if not measured and hinge_off_part(model, k):
         return "its hinge passes off the part (a wide circle that mimics another motion)"
     return None
 
@@ -216,6 +217,10 @@ def drop_into_body(run, names: list[str]) -> list[str]:
 # share of the object's size (the grasp holds the handle within ~1 cm; a hinge 10 deg off at
 # half a metre strays ~5 cm over a quarter turn)
 TOOL_TOL = 0.05
+
+# the hand held a joint's part when a Gaussian of it lies within this share of the object's size
+# of the grasp point (the start's handle holds alike: core/stages/optimise/stage.py)
+HANDLE_NEAR = 0.03
 
 
 # a held tool whose approach turns by at least this much (rad) over a run turns with a hinge: a
@@ -333,98 +338,172 @@ def run_states(along: np.ndarray, ts: list[int], times: list[int]) -> list[np.nd
 
 
 def add_tool_parts(run, share: float) -> list[str]:
-    """Parts the robot was seen opening that no joint explains: each run of the tool path
+    """Joints the robot was seen opening that no joint explains: each run of the tool path
     (:func:`.hypotheses.tool_segments`: a hand holding one handle moves on a circle about its
-    hinge or a line along its slide) that no fitted joint carries the grasp point along
-    (:func:`carry_error` within ``TOOL_TOL``; a run a joint does explain is held by
-    the one that explains it best, :meth:`.model.ArticulatedSplat.hold`) gives a joint (:func:`tool_joint`; its states read off the path, 0
-    before the run and held after it, the run's ends continued or not as the depth below finds
-    more Gaussians: :func:`run_states`). Its part is chosen by the frames' depth
-    (:func:`.assign.depth_votes`): the Gaussians of the base, or of joints that explain no run,
-    that the frames contradict at least ``MARGIN`` frames less when this joint moves them, or
-    whose support less contradiction rises by ``MARGIN`` (a slide that moves a door into the
-    body hides it, and hidden is never contradicted); their connected group nearest the first
-    grasp point. It is fitted and kept as :func:`add_missed` keeps a part: when it
-    clearly lowers the image loss and moves plausibly. The robot's own record is the evidence
-    of which part moved and how; the motion route and the missed-part search see only pixels,
-    and lose a part the arm hides (a storage unit's two doors, proposed as one slide).
-    Returns the names of the added joints."""
-    from .assign import MARGIN, depth_votes
-
-    model, frames, cfg = run.model, run.frames, run.cfg
+    hinge or a line along its slide) is held (:meth:`.model.ArticulatedSplat.hold`, the tool
+    term of every later fit) by the fitted joint that carries its first grasp point along it
+    best, within ``TOOL_TOL`` of the object's size (:func:`carry_error`). A run no joint
+    carries gives a joint read off the path (:func:`tool_joint`; its states 0 before the run and
+    held after it, the run's ends continued or not as the depth below finds more Gaussians:
+    :func:`run_states`), held along the run, tried on two parts:
+    - the part of the joint the hand grasped (:func:`held_part`), that joint's motion replaced
+      (a realistic robot dishwasher's door, proposed as a slide of the right part: as a new
+      part its depth-chosen Gaussians made the true hinge explain the frames worse than none);
+    - a new part chosen by the frames' depth (:func:`.assign.depth_votes`): the Gaussians of
+      the base, or of joints that explain no run, that the frames contradict at least
+      ``MARGIN`` frames less when this joint moves them, or whose support less contradiction
+      rises by ``MARGIN`` (a slide that moves a door into the body hides it, and hidden is
+      never contradicted); their connected group nearest the first grasp point (a storage
+      unit's two doors, proposed as one slide of both).
+    Each is fitted alone and is kept, as :func:`add_missed` keeps a part, when it clearly
+    lowers the image loss and moves plausibly; of the two the lower image loss. The robot's own
+    record is the evidence of which part moved and how; the motion route and the missed-part
+    search see only pixels, and lose a part the arm hides. Returns the names of the joints
+    added or replaced."""
+    model, frames = run.model, run.frames
     if not frames.tool:
         return []
     times = sorted(frames.tool)
     path = np.array([frames.tool[t][:3, 3] for t in times])
-    means = model.splat.means.cpu().numpy().astype(float)
-    steps = max(run.options.iterations // 2, 1)
     runs = tool_segments(path, 0.01 * model.size, 0.02 * model.size)
     tol = TOOL_TOL * model.size
     added: list[str] = []
     for r, seg in enumerate(runs):
         ts, P = [times[i] for i in seg], path[seg]
         approach = np.array([frames.tool[t][:3, 2] for t in ts])
+        ti = [model.times.index(t) for t in ts]
         errors = np.array([[carry_error(model, k, [times[i] for i in q], path[q]) for q in runs]
                            for k in range(model.k)]).reshape(model.k, len(runs))
         held = errors <= tol
         if held[:, r].any():
-            holder = int(np.argmin(errors[:, r]))
-            model.hold(model.names[holder], [model.times.index(t) for t in ts], P, approach)
+            model.hold(model.names[int(np.argmin(errors[:, r]))], ti, P, approach)
             continue
-        labels = model.labels()
-        free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not held[k].any()])
-        kind, axis, point, along = tool_joint(P, model.size, approach)
+        joint = tool_joint(P, model.size, approach)
         with unshaded(model):
-            before_frames = run.evaluate()
-        kept = snapshot(model)
-        name = f"part_{len(model.names) + 1}"
-        while name in model.names:
-            name += "_"
-        seed = np.zeros(model.splat.n, bool)
-        seed[int(np.argmin(np.linalg.norm(means - P[0], axis=1)))] = True
-        k = model.add(name, kind, axis, point, seed)
-        model.hold(name, [model.times.index(t) for t in ts], P, approach)
-        run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
-        candidates = run_states(along, ts, model.times)
-        moves, best = np.zeros(0, int), candidates[0]
-        for values in candidates:
-            model.set_type(k, kind, axis, point, values)
-            support, against = (x.cpu().numpy() for x in depth_votes(model, frames, cfg))
-            at = np.arange(model.splat.n), labels
-            here, net = against[at], support[at] - against[at]
-            these = np.flatnonzero(free & (support[:, k + 1] > 0) & (
-                (against[:, k + 1] <= here - MARGIN)
-                | (support[:, k + 1] - against[:, k + 1] >= net + MARGIN)))
-            if len(these) > len(moves):
-                moves, best = these, values
-        model.set_type(k, kind, axis, point, best)
-        groups = clusters(means[moves], max(10, model.splat.n // 100))
-        why = "the frames' depth gives it no part"
-        if groups:
-            near = min(groups, key=lambda g: float(np.linalg.norm(means[moves[g]] - P[0],
-                                                                   axis=1).min()))
-            part = labels.copy()
-            part[moves[near]] = k + 1
-            model.reassign_all(part)
-            run.run_fit(steps, f"new part {name} from the robot's path",
-                        share / max(len(runs), 1), free=[i == k for i in range(model.k)],
-                        coarse=cfg.coarse, coarse_level=part_level(model, frames, k))
-            with unshaded(model):
-                after_frames = run.evaluate()
-            gain = clearly_better(before_frames, after_frames, [])
-            why = (implausible(model, k) if gain else
-                   f"it does not lower the image loss clearly ({float(after_frames.mean()):.5f}"
-                   f" against {float(before_frames.mean()):.5f})")
-            run.progress.log(f"{name}: the robot's tool moved over {len(ts)} steps that no "
-                             f"joint explains; as a {kind} part of {len(near)} Gaussians the "
-                             f"image loss is {float(after_frames.mean()):.5f} (without "
-                             f"{float(before_frames.mean()):.5f})")
+            before = run.evaluate()
+        labels, kept = model.labels(), snapshot(model)
+        share_each = share / max(len(runs), 1) / 2
+        # the joint whose part the hand held, its motion read off the path instead ...
+        k = held_part(model, held, P[0])
+        retyped: tuple | None = None
+        if k is not None:
+            model.set_type(k, *joint[:3], run_states(joint[3], ts, model.times)[0])
+            model.hold(model.names[k], ti, P, approach)
+            after = _fit_tool_part(run, k, steps_of(run), share_each, "from the robot's path")
+            why = _kept_or_why(model, k, before, after)
+            run.progress.log(f"{model.names[k]}: its part was held along {len(ts)} steps of "
+                             f"the robot's path that no joint explains; moved as read off the "
+                             f"path the image loss is {float(after.mean()):.5f} (without "
+                             f"{float(before.mean()):.5f}){'; ' + why if why else ''}")
+            if not why:
+                retyped = (float(after.mean()), snapshot(model), model.held[model.names[k]][-1])
+            model.held[model.names[k]].pop()
+            restore(model, kept)
+        # ... or a new part chosen by the frames' depth; the lower image loss is kept
+        name, after, why = _new_tool_part(run, held, ts, ti, P, approach, joint, labels,
+                                          before, share_each)
+        if not why and (retyped is None or float(after.mean()) <= retyped[0]):
+            added.append(name)
+            continue
+        if name in model.names:
+            model.drop(model.names.index(name))
+            run.trust = run.trust[:-1]
+            model.reassign_all(labels)
+        restore(model, kept)
         if why:
             run.progress.log(f"{name}: not added from the robot's path, {why}")
-            model.drop(k)
-            run.trust = run.trust[:-1]
-            restore(model, kept)
-            model.reassign_all(labels)
-            continue
-        added.append(name)
+        if retyped is not None:
+            restore(model, retyped[1])
+            model.held.setdefault(model.names[k], []).append(retyped[2])
+            added.append(model.names[k])
     return added
+
+
+def steps_of(run) -> int:
+    """Steps of a tool part's fit: half the main fit's."""
+    return max(run.options.iterations // 2, 1)
+
+
+def held_part(model: ArticulatedSplat, held: np.ndarray, grasp: np.ndarray) -> int | None:
+    """The unlocked joint that explains no run of the tool path (``held`` (K, runs)) whose part
+    the hand grasped: a Gaussian of it within ``HANDLE_NEAR`` of the object's size of the
+    ``grasp`` point (the nearest such part), or None."""
+    means = model.splat.means.cpu().numpy().astype(float)
+    labels = model.labels()
+    best, near = None, HANDLE_NEAR * model.size
+    for k in range(model.k):
+        pts = means[labels == k + 1]
+        if held[k].any() or bool(model.locked[k]) or not len(pts):
+            continue
+        d = float(np.linalg.norm(pts - grasp, axis=1).min())
+        if d <= near:
+            best, near = k, d
+    return best
+
+
+def _fit_tool_part(run, k: int, steps: int, share: float, what: str) -> np.ndarray:
+    """Joint ``k`` fitted alone (coarse-to-fine, ``steps``); the per-frame image losses after
+    (unshaded)."""
+    model = run.model
+    run.run_fit(steps, f"{model.names[k]} {what}", share, free=[i == k for i in range(model.k)],
+                coarse=run.cfg.coarse, coarse_level=part_level(model, run.frames, k))
+    with unshaded(model):
+        return run.evaluate()
+
+
+def _kept_or_why(model: ArticulatedSplat, k: int, before: np.ndarray, after: np.ndarray) -> str:
+    """Why a tool part's fit is not kept ('' when it is): it does not clearly lower the image
+    loss, or it moves implausibly."""
+    if not clearly_better(before, after, []):
+        return (f"it does not lower the image loss clearly ({float(after.mean()):.5f} against "
+                f"{float(before.mean()):.5f})")
+    return implausible(model, k, measured=True) or ""
+
+
+def _new_tool_part(run, held: np.ndarray, ts: list[int], ti: list[int], P: np.ndarray,
+                   approach: np.ndarray, joint: tuple, labels: np.ndarray, before: np.ndarray,
+                   share: float) -> tuple[str, np.ndarray, str]:
+    """A new joint ``joint`` (:func:`tool_joint`) held along the run ``P`` (at times ``ts``,
+    time indices ``ti``), its part chosen by the frames' depth (:func:`add_tool_parts`) and
+    fitted: (its name, the per-frame image losses after, why it is not kept against the
+    losses ``before`` or ''). The model
+    keeps the new joint, whatever the outcome, when it got a part."""
+    from .assign import MARGIN, depth_votes
+
+    model, frames, cfg = run.model, run.frames, run.cfg
+    kind, axis, point, along = joint
+    means = model.splat.means.cpu().numpy().astype(float)
+    free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not held[k].any()])
+    name = f"part_{len(model.names) + 1}"
+    while name in model.names:
+        name += "_"
+    seed = np.zeros(model.splat.n, bool)
+    seed[int(np.argmin(np.linalg.norm(means - P[0], axis=1)))] = True
+    k = model.add(name, kind, axis, point, seed)
+    model.hold(name, ti, P, approach)
+    run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
+    candidates = run_states(along, ts, model.times)
+    moves, best = np.zeros(0, int), candidates[0]
+    for values in candidates:
+        model.set_type(k, kind, axis, point, values)
+        support, against = (x.cpu().numpy() for x in depth_votes(model, frames, cfg))
+        at = np.arange(model.splat.n), labels
+        here, net = against[at], support[at] - against[at]
+        these = np.flatnonzero(free & (support[:, k + 1] > 0) & (
+            (against[:, k + 1] <= here - MARGIN)
+            | (support[:, k + 1] - against[:, k + 1] >= net + MARGIN)))
+        if len(these) > len(moves):
+            moves, best = these, values
+    model.set_type(k, kind, axis, point, best)
+    groups = clusters(means[moves], max(10, model.splat.n // 100))
+    if not groups:
+        return name, np.zeros(0), "the frames' depth gives it no part"
+    near = min(groups, key=lambda g: float(np.linalg.norm(means[moves[g]] - P[0], axis=1).min()))
+    part = labels.copy()
+    part[moves[near]] = k + 1
+    model.reassign_all(part)
+    after = _fit_tool_part(run, k, steps_of(run), share, "from the robot's path")
+    run.progress.log(f"{name}: the robot's tool moved over {len(ts)} steps that no joint "
+                     f"explains; as a {kind} part of {len(near)} Gaussians the image loss is "
+                     f"{float(after.mean()):.5f} (without {float(before.mean()):.5f})")
+    return name, after, _kept_or_why(model, k, before, after)

@@ -252,7 +252,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     if added and options.types:   # the new parts' types by the same evidence
         evidence.update(hypotheses.select_types(run, share=0.0,
                                                 fixed=[name not in added for name in model.names]))
-    added = [a for a in tooled if a in model.names] + added
+    added = [a for a in tooled if a in model.names and a not in start[3]] + added
     if added:                     # the new parts refined with the others, then tested again
         refine(run, n // 2, share=0.07)
         again = hypotheses.remove_spurious(run, locked=model.locked.tolist())
