@@ -389,7 +389,7 @@ def add_tool_parts(run, share: float) -> list[str]:
         if k is not None:
             model.set_type(k, *joint[:3], run_states(joint[3], ts, model.times)[0])
             model.hold(model.names[k], ti, P, approach)
-            after = _fit_tool_part(run, k, steps_of(run), share_each, "from the robot's path")
+            after = _fit_tool_part(run, k, share_each)
             why = _kept_or_why(model, k, before, after)
             run.progress.log(f"{model.names[k]}: its part was held along {len(ts)} steps of "
                              f"the robot's path that no joint explains; moved as read off the "
@@ -410,18 +410,13 @@ def add_tool_parts(run, share: float) -> list[str]:
             run.trust = run.trust[:-1]
             model.reassign_all(labels)
         restore(model, kept)
-        if why:
-            run.progress.log(f"{name}: not added from the robot's path, {why}")
+        run.progress.log(f"{name}: not added from the robot's path, " + (
+            why or f"{model.names[k]} moved as read off it explains the frames better"))
         if retyped is not None:
             restore(model, retyped[1])
             model.held.setdefault(model.names[k], []).append(retyped[2])
             added.append(model.names[k])
     return added
-
-
-def steps_of(run) -> int:
-    """Steps of a tool part's fit: half the main fit's."""
-    return max(run.options.iterations // 2, 1)
 
 
 def held_part(model: ArticulatedSplat, held: np.ndarray, grasp: np.ndarray) -> int | None:
@@ -441,11 +436,13 @@ def held_part(model: ArticulatedSplat, held: np.ndarray, grasp: np.ndarray) -> i
     return best
 
 
-def _fit_tool_part(run, k: int, steps: int, share: float, what: str) -> np.ndarray:
-    """Joint ``k`` fitted alone (coarse-to-fine, ``steps``); the per-frame image losses after
-    (unshaded)."""
+def _fit_tool_part(run, k: int, share: float) -> np.ndarray:
+    """Joint ``k`` fitted alone (coarse-to-fine, half the main fit's steps); the per-frame
+    image losses after (unshaded)."""
     model = run.model
-    run.run_fit(steps, f"{model.names[k]} {what}", share, free=[i == k for i in range(model.k)],
+    steps = max(run.options.iterations // 2, 1)
+    run.run_fit(steps, f"{model.names[k]} from the robot's path", share,
+                free=[i == k for i in range(model.k)],
                 coarse=run.cfg.coarse, coarse_level=part_level(model, run.frames, k))
     with unshaded(model):
         return run.evaluate()
@@ -466,8 +463,7 @@ def _new_tool_part(run, held: np.ndarray, ts: list[int], ti: list[int], P: np.nd
     """A new joint ``joint`` (:func:`tool_joint`) held along the run ``P`` (at times ``ts``,
     time indices ``ti``), its part chosen by the frames' depth (:func:`add_tool_parts`) and
     fitted: (its name, the per-frame image losses after, why it is not kept against the
-    losses ``before`` or ''). The model
-    keeps the new joint, whatever the outcome, when it got a part."""
+    losses ``before`` or ''). The model keeps the new joint whatever the outcome."""
     from .assign import MARGIN, depth_votes
 
     model, frames, cfg = run.model, run.frames, run.cfg
@@ -502,7 +498,7 @@ def _new_tool_part(run, held: np.ndarray, ts: list[int], ti: list[int], P: np.nd
     part = labels.copy()
     part[moves[near]] = k + 1
     model.reassign_all(part)
-    after = _fit_tool_part(run, k, steps_of(run), share, "from the robot's path")
+    after = _fit_tool_part(run, k, share)
     run.progress.log(f"{name}: the robot's tool moved over {len(ts)} steps that no joint "
                      f"explains; as a {kind} part of {len(near)} Gaussians the image loss is "
                      f"{float(after.mean()):.5f} (without {float(before.mean()):.5f})")
