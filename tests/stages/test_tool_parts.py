@@ -174,3 +174,23 @@ def test_the_hands_turn_pins_a_short_arcs_radius():
                                                  origin=model.joint_lines()[1][0]), truth)
     assert errors[False].axis_error_deg < 2.0 and errors[False].origin_error_cm < 1.5, errors
     assert errors[True].axis_error_deg > 10.0, errors
+
+
+def test_a_joint_carries_the_runs_it_moved_along_not_a_reach():
+    """A door held 40 deg along its hinge carries that run; the same door at rest does not
+    carry a 4 cm reach of the hand towards its handle (within 5 % of the object's size, but
+    not within half of how far the hand went), so the tool term cannot pull it along a reach."""
+    from artgs.core.stages.optimise.missed import carried_runs
+
+    axis, origin = np.array([0.0, 0.0, 1.0]), np.array([0.3, -0.2, 0.0])
+    times = list(range(10))
+    values = np.radians([0.0] * 5 + [10.0, 20.0, 30.0, 40.0, 40.0])
+    door = Joint(name="door", type="revolute", axis=axis, origin=origin,
+                 states=dict(zip(times, values)))
+    grasp = np.array([0.9, 0.3, 0.4])
+    reach = grasp + np.outer(np.linspace(0.04, 0.0, 5), [0.0, -1.0, 0.0])
+    path = np.concatenate([reach, _path("revolute", axis, origin, values[5:], grasp)])
+    runs = [np.arange(0, 5), np.arange(4, 9)]
+    errors, held = carried_runs(_held_model(door, times), runs, path, times)
+    assert held.tolist() == [[False, True]], errors
+    assert errors[0, 1] < 1e-6 and errors[0, 0] > 0.039

@@ -218,6 +218,10 @@ def drop_into_body(run, names: list[str]) -> list[str]:
 # half a metre strays ~5 cm over a quarter turn)
 TOOL_TOL = 0.05
 
+# ... and within this share of how far the run went: a joint at rest "carries" a short run (a
+# hand reaching for a handle) within the size share, and would be pulled along it
+CARRIED = 0.5
+
 # the hand held a joint's part when a Gaussian of it lies within this share of the object's size
 # of the grasp point (the start's handle holds alike: core/stages/optimise/stage.py)
 HANDLE_NEAR = 0.03
@@ -316,6 +320,17 @@ def carry_error(model: ArticulatedSplat, k: int, times: list[int], path: np.ndar
                                      @ start @ p0)[:3] - p)) for t, p in zip(times, path))
 
 
+def carried_runs(model: ArticulatedSplat, runs: list[np.ndarray], path: np.ndarray,
+                 times: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint and run of the tool ``path`` (positions at ``times``; ``runs`` index arrays):
+    the :func:`carry_error` (K, runs), and whether the joint carries the run: within
+    ``TOOL_TOL`` of the object's size and ``CARRIED`` of how far the run went."""
+    spans = np.array([np.linalg.norm(path[q] - path[q[0]], axis=1).max() for q in runs])
+    errors = np.array([[carry_error(model, k, [times[i] for i in q], path[q]) for q in runs]
+                       for k in range(model.k)]).reshape(model.k, len(runs))
+    return errors, errors <= np.minimum(TOOL_TOL * model.size, CARRIED * spans)
+
+
 def run_states(along: np.ndarray, ts: list[int], times: list[int]) -> list[np.ndarray]:
     """Candidate states at ``times`` of a joint read off one tool run (values ``along`` at the
     run's times ``ts``, 0 before, held after): as read, and with either end continued by its
@@ -342,7 +357,8 @@ def add_tool_parts(run, share: float) -> list[str]:
     (:func:`.hypotheses.tool_segments`: a hand holding one handle moves on a circle about its
     hinge or a line along its slide) is held (:meth:`.model.ArticulatedSplat.hold`, the tool
     term of every later fit) by the fitted joint that carries its first grasp point along it
-    best, within ``TOOL_TOL`` of the object's size (:func:`carry_error`). A run no joint
+    best, within ``TOOL_TOL`` of the object's size and ``CARRIED`` of how far the run went
+    (:func:`carry_error`). A run no joint
     carries gives a joint read off the path (:func:`tool_joint`; its states 0 before the run and
     held after it, the run's ends continued or not as the depth below finds more Gaussians:
     :func:`run_states`), held along the run, tried on two parts:
@@ -366,17 +382,18 @@ def add_tool_parts(run, share: float) -> list[str]:
     times = sorted(frames.tool)
     path = np.array([frames.tool[t][:3, 3] for t in times])
     runs = tool_segments(path, 0.01 * model.size, 0.02 * model.size)
-    tol = TOOL_TOL * model.size
     added: list[str] = []
     for r, seg in enumerate(runs):
         ts, P = [times[i] for i in seg], path[seg]
         approach = np.array([frames.tool[t][:3, 2] for t in ts])
         ti = [model.times.index(t) for t in ts]
-        errors = np.array([[carry_error(model, k, [times[i] for i in q], path[q]) for q in runs]
-                           for k in range(model.k)]).reshape(model.k, len(runs))
-        held = errors <= tol
+        errors, held = carried_runs(model, runs, path, times)
         if held[:, r].any():
-            model.hold(model.names[int(np.argmin(errors[:, r]))], ti, P, approach)
+            k = int(np.argmin(errors[:, r]))
+            model.hold(model.names[k], ti, P, approach)
+            run.progress.log(f"{model.names[k]}: held by the robot's tool from time {ts[0]} to "
+                             f"{ts[-1]} (carries the grasp within "
+                             f"{100 * errors[k, r]:.1f} cm); the path joins its fits")
             continue
         joint = tool_joint(P, model.size, approach)
         with unshaded(model):
