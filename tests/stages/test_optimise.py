@@ -6,6 +6,7 @@ import copy
 import multiprocessing
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -574,6 +575,22 @@ def test_pieces_of_one_door_become_one_joint(cabinet, tmp_path):
     hinge = next(j for j in art.joints if j.type == "revolute")
     s = match_joints([hinge], [door])[0]
     assert s.axis_error_deg < 2.0 and s.origin_error_cm < 2.0, s
+
+
+def test_a_trusted_joint_takes_a_piece_that_moves_alike(cabinet):
+    """The door as two pieces on its true joint, the larger piece's joint free and the smaller
+    one's trusted (a part the robot opened, a user's joint): the free piece joins the trusted
+    joint, which keeps its name, and not the other way round."""
+    from artgs.core.stages.optimise.hypotheses import merge_duplicates
+
+    run = _pieces_run(cabinet, 0.0, 0.0)
+    run.options = replace(run.options, iterations=8)
+    counts = np.bincount(run.model.labels(), minlength=4)[2:]
+    small, large = ("upper", "lower") if counts[0] < counts[1] else ("lower", "upper")
+    fixed = [False] + [name == small for name in run.model.names[1:]]
+    merged = merge_duplicates(run, fixed)
+    assert merged == [[small, large]], merged
+    assert run.model.names[1:] == [small]
 
 
 def test_one_joint_takes_a_piece_its_own_fit_moves_wrongly(cabinet):

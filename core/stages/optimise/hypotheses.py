@@ -899,8 +899,10 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
     test cabinet's door cut in two, 0.6 % of the image loss), so the loss is reported, not used
     to keep them apart; where the joints do not agree, one joint that explains both pieces
     clearly better than the two apart and than the other piece at rest
-    (:func:`one_explains_both`) takes both. ``fixed`` joints (trusted user joints, locked ones)
-    are left alone. Returns ``[kept, merged]`` name pairs. The model must be hardened."""
+    (:func:`one_explains_both`) takes both. ``fixed`` joints (trusted user joints, locked ones,
+    parts the robot opened) are never merged into another, and keep their own joint when a
+    piece that moves alike joins them (a leftover of a door the robot's path gave its own
+    part stayed as an extra joint). Returns ``[kept, merged]`` name pairs. The model must be hardened."""
     model, frames = run.model, run.frames
     merged: list[list[str]] = []
     fixed = list(fixed)
@@ -908,8 +910,8 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
     while True:
         counts = np.bincount(model.labels(), minlength=model.k + 1)[1:]
         pairs = [(i, j) for i in range(model.k) for j in range(model.k)
-                 if i != j and not fixed[i] and not fixed[j]
-                 and (counts[i], -i) > (counts[j], -j) and same_joint(model, i, j)]
+                 if i != j and not fixed[j]
+                 and (fixed[i] or (counts[i], -i) > (counts[j], -j)) and same_joint(model, i, j)]
         alike = bool(pairs)
         if not pairs:
             pairs = one_explains_both(run, fixed)
@@ -925,7 +927,7 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
         run.trust = torch.cat([run.trust[:j], run.trust[j + 1:]])
         del fixed[j]
         i -= int(j < i)
-        start = start_best(run, i, fits, ids)
+        start = "kept" if fixed[i] else start_best(run, i, fits, ids)
         run.run_fit(steps, f"{names[1]} with {names[0]}", 0.0,
                     free=[k == i for k in range(model.k)], lr_scale=0.3)
         joined = float(run.evaluate().mean())
