@@ -124,8 +124,9 @@ class ArticulatedSplat:
         # helper process renders them so too
         self.transparent: torch.Tensor | None = None
         #: per joint name, the runs of the robot's tool path its part was held along
-        #: (:meth:`held_loss`): (time indices, tool positions (M,3)) pairs
-        self.held: dict[str, list[tuple[torch.Tensor, torch.Tensor]]] = {}
+        #: (:meth:`hold`, :meth:`held_loss`): (time indices, tool positions (M,3), tool
+        #: approaches (M,3) or None)
+        self.held: dict[str, list[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]]] = {}
         tree = cKDTree(splat.means.cpu().numpy())
         k = min(knn + 1, splat.n)
         self.neighbours = torch.as_tensor(tree.query(splat.means.cpu().numpy(), k)[1][:, 1:],
