@@ -179,7 +179,8 @@ def test_the_hands_turn_pins_a_short_arcs_radius():
 def test_a_joint_carries_the_runs_it_moved_along_not_a_reach():
     """A door held 40 deg along its hinge carries that run; the same door at rest does not
     carry a 4 cm reach of the hand towards its handle (within 5 % of the object's size, but
-    not within half of how far the hand went), so the tool term cannot pull it along a reach."""
+    not within half of how far the hand went), so the tool term cannot pull it along a reach;
+    and it carries no run read off the path as a slide."""
     from artgs.core.stages.optimise.missed import carried_runs
 
     axis, origin = np.array([0.0, 0.0, 1.0]), np.array([0.3, -0.2, 0.0])
@@ -191,6 +192,11 @@ def test_a_joint_carries_the_runs_it_moved_along_not_a_reach():
     reach = grasp + np.outer(np.linspace(0.04, 0.0, 5), [0.0, -1.0, 0.0])
     path = np.concatenate([reach, _path("revolute", axis, origin, values[5:], grasp)])
     runs = [np.arange(0, 5), np.arange(4, 9)]
-    errors, held = carried_runs(_held_model(door, times), runs, path, times)
+    errors, held = carried_runs(_held_model(door, times), runs, path, times,
+                                ["prismatic", "revolute"])
     assert held.tolist() == [[False, True]], errors
     assert errors[0, 1] < 1e-6 and errors[0, 0] > 0.039
+    # read off the path as a slide (a short arc whose hand did not turn): not this hinge's
+    _, held = carried_runs(_held_model(door, times), runs, path, times,
+                           ["prismatic", "prismatic"])
+    assert not held.any()

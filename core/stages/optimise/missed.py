@@ -321,14 +321,19 @@ def carry_error(model: ArticulatedSplat, k: int, times: list[int], path: np.ndar
 
 
 def carried_runs(model: ArticulatedSplat, runs: list[np.ndarray], path: np.ndarray,
-                 times: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """Per joint and run of the tool ``path`` (positions at ``times``; ``runs`` index arrays):
-    the :func:`carry_error` (K, runs), and whether the joint carries the run: within
-    ``TOOL_TOL`` of the object's size and ``CARRIED`` of how far the run went."""
+                 times: list[int], kinds: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint and run of the tool ``path`` (positions at ``times``; ``runs`` index arrays,
+    ``kinds`` the type of each run's :func:`tool_joint`): the :func:`carry_error` (K, runs),
+    and whether the joint carries the run: a joint of the run's type (a hinge of wide radius
+    carries a short slide within centimetres, and the tool term would then bend it towards
+    a line) within ``TOOL_TOL`` of the object's size and ``CARRIED`` of how far the run
+    went."""
     spans = np.array([np.linalg.norm(path[q] - path[q[0]], axis=1).max() for q in runs])
     errors = np.array([[carry_error(model, k, [times[i] for i in q], path[q]) for q in runs]
                        for k in range(model.k)]).reshape(model.k, len(runs))
-    return errors, errors <= np.minimum(TOOL_TOL * model.size, CARRIED * spans)
+    alike = np.array([[t == kind for kind in kinds] for t in model.types], bool)
+    return errors, alike.reshape(errors.shape) & (
+        errors <= np.minimum(TOOL_TOL * model.size, CARRIED * spans))
 
 
 def run_states(along: np.ndarray, ts: list[int], times: list[int]) -> list[np.ndarray]:
@@ -357,8 +362,8 @@ def add_tool_parts(run, share: float) -> list[str]:
     (:func:`.hypotheses.tool_segments`: a hand holding one handle moves on a circle about its
     hinge or a line along its slide) is held (:meth:`.model.ArticulatedSplat.hold`, the tool
     term of every later fit) by the fitted joint that carries its first grasp point along it
-    best, within ``TOOL_TOL`` of the object's size and ``CARRIED`` of how far the run went
-    (:func:`carry_error`). A run no joint
+    best (:func:`carried_runs`: of the run's type, within ``TOOL_TOL`` of the object's size
+    and ``CARRIED`` of how far the run went). A run no joint
     carries gives a joint read off the path (:func:`tool_joint`; its states 0 before the run and
     held after it, the run's ends continued or not as the depth below finds more Gaussians:
     :func:`run_states`), held along the run, tried on two parts:
@@ -382,12 +387,14 @@ def add_tool_parts(run, share: float) -> list[str]:
     times = sorted(frames.tool)
     path = np.array([frames.tool[t][:3, 3] for t in times])
     runs = tool_segments(path, 0.01 * model.size, 0.02 * model.size)
+    turns = np.array([frames.tool[t][:3, 2] for t in times])
+    joints = [tool_joint(path[q], model.size, turns[q]) for q in runs]
     added: list[str] = []
     for r, seg in enumerate(runs):
         ts, P = [times[i] for i in seg], path[seg]
-        approach = np.array([frames.tool[t][:3, 2] for t in ts])
+        approach = turns[seg]
         ti = [model.times.index(t) for t in ts]
-        errors, held = carried_runs(model, runs, path, times)
+        errors, held = carried_runs(model, runs, path, times, [j[0] for j in joints])
         if held[:, r].any():
             k = int(np.argmin(errors[:, r]))
             model.hold(model.names[k], ti, P, approach)
@@ -395,10 +402,11 @@ def add_tool_parts(run, share: float) -> list[str]:
                              f"{ts[-1]} (carries the grasp within "
                              f"{100 * errors[k, r]:.1f} cm); the path joins its fits")
             continue
-        joint = tool_joint(P, model.size, approach)
+        joint = joints[r]
         with unshaded(model):
             before = run.evaluate()
         labels, kept = model.labels(), snapshot(model)
+        draws = run.rng.bit_generator.state     # given back when nothing is kept
         share_each = share / max(len(runs), 1) / 2
         # the joint whose part the hand held, its motion read off the path instead ...
         k = held_part(model, held, P[0])
@@ -433,6 +441,8 @@ def add_tool_parts(run, share: float) -> list[str]:
             restore(model, retyped[1])
             model.held.setdefault(model.names[k], []).append(retyped[2])
             added.append(model.names[k])
+        else:     # as if never tried: the later fits draw the same times
+            run.rng.bit_generator.state = draws
     return added
 
 
