@@ -200,3 +200,18 @@ def test_a_joint_carries_the_runs_it_moved_along_not_a_reach():
     _, held = carried_runs(_held_model(door, times), runs, path, times,
                            ["prismatic", "prismatic"])
     assert not held.any()
+
+
+def test_a_jump_to_another_handle_ends_a_run():
+    """Two drawers pulled one after the other, 53 cm apart: their slides lie on one wide circle
+    within the runs' tolerance, so only the hand's jump between the handles (a step over 5 %
+    of the size and 4 times the run's longest) tells them apart: two runs, not one."""
+    from artgs.core.stages.optimise.hypotheses import tool_segments
+
+    pull = np.array([0.877, 0.481, 0.0])
+    lower = np.array([0.5, 0.1, 0.27]) + np.outer(np.arange(6) * 0.005, pull)
+    upper = np.array([0.5, 0.1, 0.80]) + np.outer(np.arange(6) * 0.03, pull)
+    path = np.concatenate([lower, upper])
+    assert len(tool_segments(path, 0.016, 0.02, np.inf)) == 1     # no jump rule: one circle
+    runs = tool_segments(path, 0.016, 0.02, 0.08)
+    assert [r.tolist() for r in runs] == [list(range(6)), list(range(6, 12))]

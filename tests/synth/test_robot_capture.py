@@ -169,7 +169,7 @@ def test_tool_path_gives_the_hinge(capture_dir):
     # a second part held after a jump: the door's path, then a slide 40 cm away
     door = np.array([path[t][:3, 3] for t in sorted(path)])
     slide = door[-1] + np.array([0.4, 0.0, 0.0]) + np.outer(np.arange(5) * 0.05, [0.0, 1.0, 0.0])
-    runs = tool_segments(np.concatenate([door, slide]), 0.01, 0.02)
+    runs = tool_segments(np.concatenate([door, slide]), 0.01, 0.02, 0.05)
     assert [r.tolist() for r in runs] == [list(range(len(door))),
                                           list(range(len(door), len(door) + 5))]
 

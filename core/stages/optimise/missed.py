@@ -386,7 +386,7 @@ def add_tool_parts(run, share: float) -> list[str]:
         return []
     times = sorted(frames.tool)
     path = np.array([frames.tool[t][:3, 3] for t in times])
-    runs = tool_segments(path, 0.01 * model.size, 0.02 * model.size)
+    runs = tool_segments(path, 0.01 * model.size, 0.02 * model.size, 0.05 * model.size)
     turns = np.array([frames.tool[t][:3, 2] for t in times])
     joints = [tool_joint(path[q], model.size, turns[q]) for q in runs]
     added: list[str] = []
