@@ -742,8 +742,7 @@ def remove_spurious(run, locked: list[bool], join: bool = False) -> list[str]:
         removed.append(name)
         if label:
             model.reassign(model.labels() == k + 1, label)
-        model.drop(k)
-        run.trust = torch.cat([run.trust[:k], run.trust[k + 1:]])
+        run.drop_joint(k)
         locked = locked[:k] + locked[k + 1:]
         if label:       # the joint refitted with its new Gaussians, as a merge does
             j = label - 1 - int(label - 1 > k)
@@ -933,8 +932,7 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
         ids = sorted(set(moving_frames(model, frames, i)) | set(moving_frames(model, frames, j)))
         model.reassign(model.labels() == j + 1, i + 1)
         names = model.names[i], model.names[j]
-        model.drop(j)
-        run.trust = torch.cat([run.trust[:j], run.trust[j + 1:]])
+        run.drop_joint(j)
         del fixed[j]
         i -= int(j < i)
         start = "kept" if fixed[i] else start_best(run, i, fits, ids)

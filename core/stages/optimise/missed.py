@@ -89,11 +89,8 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             before_frames = run.evaluate()
         before = float(before_frames.mean())
         kept = snapshot(model)
-        name = f"part_{len(model.names) + 1}"
-        while name in model.names:
-            name += "_"
-        k = model.add(name, REVOLUTE, np.array([0.0, 0.0, 1.0]), means[members].mean(0), members)
-        run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
+        k = run.add_joint(REVOLUTE, np.array([0.0, 0.0, 1.0]), means[members].mean(0), members)
+        name = model.names[k]
         pts = part_points(model, k)
         hyps = [(REVOLUTE, a, p) for a, p in hinge_lines(model, pts)]
         hyps += [(PRISMATIC, d, pts.mean(0)) for d in
@@ -134,8 +131,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
             if gain:
                 break
         if not gain:
-            model.drop(k)
-            run.trust = run.trust[:-1]
+            run.drop_joint(k)
             restore(model, kept)
             tried |= members
             continue
@@ -146,8 +142,7 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         run.progress.log(f"{name}: moves with {model.names[into]}; merged into its part")
         fitted = snapshot(model)
         model.reassign(model.labels() == k + 1, into + 1)
-        model.drop(k)
-        run.trust = run.trust[:-1]
+        run.drop_joint(k)
         restore(model, tuple(part[:-1] for part in fitted))    # every joint's but the last
     return added
 
@@ -208,8 +203,7 @@ def drop_into_body(run, names: list[str]) -> list[str]:
         if share > HIDDEN_SHARE:
             run.progress.log(f"{name}: dropped, its fit moves {100 * share:.0f} % of its part "
                              f"into the body (behind what the static views measured)")
-            model.drop(k)
-            run.trust = torch.cat([run.trust[:k], run.trust[k + 1:]])
+            run.drop_joint(k)
             dropped.append(name)
     return dropped
 
@@ -387,12 +381,12 @@ def add_tool_parts(run, share: float) -> list[str]:
     times = sorted(frames.tool)
     path = np.array([frames.tool[t][:3, 3] for t in times])
     runs = tool_segments(path, 0.01 * model.size, 0.02 * model.size, 0.05 * model.size)
-    turns = np.array([frames.tool[t][:3, 2] for t in times])
-    joints = [tool_joint(path[q], model.size, turns[q]) for q in runs]
+    approaches = np.array([frames.tool[t][:3, 2] for t in times])
+    joints = [tool_joint(path[q], model.size, approaches[q]) for q in runs]
     added: list[str] = []
     for r, seg in enumerate(runs):
         ts, P = [times[i] for i in seg], path[seg]
-        approach = turns[seg]
+        approach = approaches[seg]
         ti = [model.times.index(t) for t in ts]
         errors, held = carried_runs(model, runs, path, times, [j[0] for j in joints])
         if held[:, r].any():
@@ -431,8 +425,7 @@ def add_tool_parts(run, share: float) -> list[str]:
             added.append(name)
             continue
         if name in model.names:
-            model.drop(model.names.index(name))
-            run.trust = run.trust[:-1]
+            run.drop_joint(model.names.index(name))
             model.reassign_all(labels)
         restore(model, kept)
         run.progress.log(f"{name}: not added from the robot's path, " + (
@@ -497,14 +490,11 @@ def _new_tool_part(run, held: np.ndarray, ts: list[int], ti: list[int], P: np.nd
     kind, axis, point, along = joint
     means = model.splat.means.cpu().numpy().astype(float)
     free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not held[k].any()])
-    name = f"part_{len(model.names) + 1}"
-    while name in model.names:
-        name += "_"
     seed = np.zeros(model.splat.n, bool)
     seed[int(np.argmin(np.linalg.norm(means - P[0], axis=1)))] = True
-    k = model.add(name, kind, axis, point, seed)
+    k = run.add_joint(kind, axis, point, seed)
+    name = model.names[k]
     model.hold(name, ti, P, approach)
-    run.trust = torch.cat([run.trust, torch.zeros(1, device=run.trust.device)])
     candidates = run_states(along, ts, model.times)
     moves, best = np.zeros(0, int), candidates[0]
     for values in candidates:

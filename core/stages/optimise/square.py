@@ -31,7 +31,7 @@ from ...geometry.separate import camera_up
 from ...model.capture import Capture
 from .hypotheses import REMOVE_TOL, SIGNIFICANT, moving_frames, paired_t, part_points
 from .kinematics import REVOLUTE
-from .model import restore, snapshot
+from .model import farther, restore, snapshot
 
 #: Fits further than this (degrees) from every direction of the body's box are left as they are.
 MAX_TURN = 30.0
@@ -95,7 +95,7 @@ def square_to_body(run, capture: Capture, fixed: list[bool], steps: int
         t = paired_t(losses[1] - losses[0])
         rise = float(losses[1].mean() / losses[0].mean()) - 1.0
         worse = rise > CLEARLY_WORSE or (rise > REMOVE_TOL and t > SIGNIFICANT) \
-            or model.leaves_path(k, paths[0])
+            or farther(paths[1], paths[0], model.size)
         restore(model, fitted if worse else states[1])
         fit, squared = float(losses[0].mean()), float(losses[1].mean())
         report[model.names[k]] = {"turned_deg": round(turn, 3), "loss_fit": round(fit, 6),

@@ -128,6 +128,22 @@ class Runner:
         self.done += share
         return loss
 
+    def add_joint(self, kind: str, axis: np.ndarray, origin: np.ndarray,
+                  members: np.ndarray) -> int:
+        """A new joint ``part_<n>`` (the first free name) whose part is the Gaussians
+        ``members``, untrusted (:meth:`.model.ArticulatedSplat.add`); returns its index."""
+        name = f"part_{len(self.model.names) + 1}"
+        while name in self.model.names:
+            name += "_"
+        self.trust = torch.cat([self.trust, torch.zeros(1, device=self.trust.device)])
+        return self.model.add(name, kind, axis, origin, members)
+
+    def drop_joint(self, k: int) -> None:
+        """Remove joint ``k`` and its trust; its Gaussians join the base
+        (:meth:`.model.ArticulatedSplat.drop`)."""
+        self.model.drop(k)
+        self.trust = torch.cat([self.trust[:k], self.trust[k + 1:]])
+
     def evaluate(self, level: int = 0, subset: list[int] | None = None) -> np.ndarray:
         """:func:`.fit.evaluate` of the model, its frames split with the helper process when
         there is one (:func:`.parallel.evaluate`)."""
