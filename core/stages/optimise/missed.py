@@ -14,7 +14,7 @@ from .hypotheses import (REMOVE_TOL, clearly_better, hidden_share, hinge_lines, 
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot, unshaded
 from .plausible import HIDDEN_SHARE, little_motion, off_part
-from .seen import unexplained
+from .seen import seen_static, unexplained
 
 
 def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
@@ -364,12 +364,11 @@ def add_tool_parts(run, share: float) -> list[str]:
     - the part of the joint the hand grasped (:func:`held_part`), that joint's motion replaced
       (a realistic robot dishwasher's door, proposed as a slide of the right part: as a new
       part its depth-chosen Gaussians made the true hinge explain the frames worse than none);
-    - a new part chosen by the frames' depth (:func:`.assign.depth_votes`): the Gaussians of
-      the base, or of joints that explain no run, that the frames contradict at least
-      ``MARGIN`` frames less when this joint moves them, or whose support less contradiction
-      rises by ``MARGIN`` (a slide that moves a door into the body hides it, and hidden is
-      never contradicted); their connected group nearest the first grasp point (a storage
-      unit's two doors, proposed as one slide of both).
+    - a new part chosen by the frames (:func:`moved_by_tool`: the Gaussians of the base, or of
+      joints that explain no run, that its motion puts where the depth contradicts them less,
+      less those seen staying put); their connected group nearest the first grasp point (a
+      storage unit's two doors, proposed as one slide of both; a realistic robot cabinet's
+      drawer, which without the ones seen staying put took the body's sides along).
     Each is fitted alone and is kept, as :func:`add_missed` keeps a part, when it clearly
     lowers the image loss and moves plausibly; of the two the lower image loss. The robot's own
     record is the evidence of which part moved and how; the motion route and the missed-part
@@ -477,25 +476,20 @@ def _kept_or_why(model: ArticulatedSplat, k: int, before: np.ndarray, after: np.
     return implausible(model, k, measured=True) or ""
 
 
-def _new_tool_part(run, held: np.ndarray, ts: list[int], ti: list[int], P: np.ndarray,
-                   approach: np.ndarray, joint: tuple, labels: np.ndarray, before: np.ndarray,
-                   share: float) -> tuple[str, np.ndarray, str]:
-    """A new joint ``joint`` (:func:`tool_joint`) held along the run ``P`` (at times ``ts``,
-    time indices ``ti``), its part chosen by the frames' depth (:func:`add_tool_parts`) and
-    fitted: (its name, the per-frame image losses after, why it is not kept against the
-    losses ``before`` or ''). The model keeps the new joint whatever the outcome."""
+def moved_by_tool(model: ArticulatedSplat, frames, cfg, k: int, candidates: list[np.ndarray],
+                  labels: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Indices of the Gaussians joint ``k`` (a tool part's) moves: of the ``free`` ones (their
+    ``labels`` the parts before it), those the frames' depth contradicts at least ``MARGIN``
+    frames less when the joint moves them, or whose support less contradiction rises by
+    ``MARGIN`` (:func:`.assign.depth_votes`; a slide that moves a door into the body hides
+    it, and hidden is never contradicted), with the state ``candidates`` (:func:`run_states`)
+    that gives the most (the joint is left at them); less those the frames then show staying
+    put (:func:`.seen.seen_static`): a surface that slides within its own plane (the body's
+    side beside a drawer) lands on itself, supported and never contradicted, but its pixels do
+    not change."""
     from .assign import MARGIN, depth_votes
 
-    model, frames, cfg = run.model, run.frames, run.cfg
-    kind, axis, point, along = joint
-    means = model.splat.means.cpu().numpy().astype(float)
-    free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not held[k].any()])
-    seed = np.zeros(model.splat.n, bool)
-    seed[int(np.argmin(np.linalg.norm(means - P[0], axis=1)))] = True
-    k = run.add_joint(kind, axis, point, seed)
-    name = model.names[k]
-    model.hold(name, ti, P, approach)
-    candidates = run_states(along, ts, model.times)
+    kind, axis, point = model.types[k], *(x[k] for x in model.joint_lines())
     moves, best = np.zeros(0, int), candidates[0]
     for values in candidates:
         model.set_type(k, kind, axis, point, values)
@@ -508,6 +502,31 @@ def _new_tool_part(run, held: np.ndarray, ts: list[int], ti: list[int], P: np.nd
         if len(these) > len(moves):
             moves, best = these, values
     model.set_type(k, kind, axis, point, best)
+    part = labels.copy()
+    part[moves] = k + 1
+    model.reassign_all(part)
+    return moves[~seen_static(model, frames, cfg, k)[moves]]
+
+
+def _new_tool_part(run, held: np.ndarray, ts: list[int], ti: list[int], P: np.ndarray,
+                   approach: np.ndarray, joint: tuple, labels: np.ndarray, before: np.ndarray,
+                   share: float) -> tuple[str, np.ndarray, str]:
+    """A new joint ``joint`` (:func:`tool_joint`) held along the run ``P`` (at times ``ts``,
+    time indices ``ti``), its part the connected group nearest the first grasp of the
+    Gaussians :func:`moved_by_tool` gives it, fitted: (its name, the per-frame image losses
+    after, why it is not kept against the losses ``before`` or ''). The model keeps the new
+    joint whatever the outcome."""
+    model, frames, cfg = run.model, run.frames, run.cfg
+    kind, axis, point, along = joint
+    means = model.splat.means.cpu().numpy().astype(float)
+    free = np.isin(labels, [0] + [k + 1 for k in range(model.k) if not held[k].any()])
+    seed = np.zeros(model.splat.n, bool)
+    seed[int(np.argmin(np.linalg.norm(means - P[0], axis=1)))] = True
+    k = run.add_joint(kind, axis, point, seed)
+    name = model.names[k]
+    model.hold(name, ti, P, approach)
+    moves = moved_by_tool(model, frames, cfg, k, run_states(along, ts, model.times),
+                          labels, free)
     groups = clusters(means[moves], max(10, model.splat.n // 100))
     if not groups:
         return name, np.zeros(0), "the frames' depth gives it no part"
