@@ -215,3 +215,34 @@ def test_a_jump_to_another_handle_ends_a_run():
     assert len(tool_segments(path, 0.016, 0.02, np.inf)) == 1     # no jump rule: one circle
     runs = tool_segments(path, 0.016, 0.02, 0.08)
     assert [r.tolist() for r in runs] == [list(range(6)), list(range(6, 12))]
+
+
+def test_a_run_is_held_once_a_fit_brings_a_joint_onto_it():
+    """A run of the tool path that no joint held when the path was first read is held by the
+    door once its line carries the grasp (after later fits), once only; a door 15 deg off its
+    hinge does not get it."""
+    from types import SimpleNamespace
+
+    from artgs.core.model.joints import rotation_about_axis
+    from artgs.core.model.progress import QUIET
+    from artgs.core.stages.optimise.missed import hold_carried
+
+    axis, origin = np.array([0.0, 0.0, 1.0]), np.array([0.3, -0.2, 0.0])
+    times = list(range(10))
+    values = np.radians([0.0] * 4 + [0.0, 10.0, 20.0, 30.0, 40.0, 50.0])
+    grasp = np.array([0.9, 0.3, 0.4])
+    tool = {}
+    for t, v in zip(times[4:], values[4:]):
+        M = joint_transform("revolute", axis, origin, v)
+        T = np.eye(4)
+        T[:3, 2] = M[:3, :3] @ np.array([-1.0, 0.0, 0.0])
+        T[:3, 3] = (M @ np.append(grasp, 1.0))[:3]
+        tool[t] = T
+    for tilt, expected in ((0.0, ["door"]), (15.0, [])):
+        door = Joint(name="door", type="revolute", origin=origin, states=dict(zip(times, values)),
+                     axis=rotation_about_axis(np.array([1.0, 0.0, 0.0]), np.radians(tilt)) @ axis)
+        run = SimpleNamespace(model=_held_model(door, times), frames=SimpleNamespace(tool=tool),
+                              progress=QUIET)
+        assert hold_carried(run) == expected
+        assert len(run.model.held.get("door", [])) == len(expected)
+        assert hold_carried(run) == []

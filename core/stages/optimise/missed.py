@@ -377,10 +377,7 @@ def add_tool_parts(run, share: float) -> list[str]:
     model, frames = run.model, run.frames
     if not frames.tool:
         return []
-    times = sorted(frames.tool)
-    path = np.array([frames.tool[t][:3, 3] for t in times])
-    runs = tool_segments(path, 0.01 * model.size, 0.02 * model.size, 0.05 * model.size)
-    approaches = np.array([frames.tool[t][:3, 2] for t in times])
+    times, path, approaches, runs = tool_runs(frames, model.size)
     joints = [tool_joint(path[q], model.size, approaches[q]) for q in runs]
     added: list[str] = []
     for r, seg in enumerate(runs):
@@ -389,11 +386,8 @@ def add_tool_parts(run, share: float) -> list[str]:
         ti = [model.times.index(t) for t in ts]
         errors, held = carried_runs(model, runs, path, times, [j[0] for j in joints])
         if held[:, r].any():
-            k = int(np.argmin(errors[:, r]))
-            model.hold(model.names[k], ti, P, approach)
-            run.progress.log(f"{model.names[k]}: held by the robot's tool from time {ts[0]} to "
-                             f"{ts[-1]} (carries the grasp within "
-                             f"{100 * errors[k, r]:.1f} cm); the path joins its fits")
+            k = int(np.argmin(np.where(held[:, r], errors[:, r], np.inf)))
+            _hold(run, k, ts, P, approach, errors[k, r])
             continue
         joint = joints[r]
         with unshaded(model):
@@ -436,6 +430,48 @@ def add_tool_parts(run, share: float) -> list[str]:
         else:     # as if never tried: the later fits draw the same times
             run.rng.bit_generator.state = draws
     return added
+
+
+def tool_runs(frames, size: float) -> tuple[list[int], np.ndarray, np.ndarray, list[np.ndarray]]:
+    """The robot's tool path (``frames.tool``): its times, positions (M,3), approach directions
+    (M,3) and runs (:func:`.hypotheses.tool_segments`, index arrays; a run ends where the path
+    leaves a circle or line by 1 % of the object's ``size`` or jumps by 5 %)."""
+    times = sorted(frames.tool)
+    path = np.array([frames.tool[t][:3, 3] for t in times])
+    approaches = np.array([frames.tool[t][:3, 2] for t in times])
+    return times, path, approaches, tool_segments(path, 0.01 * size, 0.02 * size, 0.05 * size)
+
+
+def _hold(run, k: int, ts: list[int], P: np.ndarray, approach: np.ndarray, error: float) -> None:
+    """Joint ``k`` held along the run ``P`` at times ``ts`` (the tool term of its later fits)."""
+    model = run.model
+    model.hold(model.names[k], [model.times.index(t) for t in ts], P, approach)
+    run.progress.log(f"{model.names[k]}: held by the robot's tool from time {ts[0]} to "
+                     f"{ts[-1]} (carries the grasp within {100 * error:.1f} cm); the path joins "
+                     f"its fits")
+
+
+def hold_carried(run) -> list[str]:
+    """Runs of the tool path that no joint holds yet, held by the joint that now carries them
+    best (:func:`carried_runs`): a joint whose line was off when :func:`add_tool_parts` read
+    the path (a realistic robot cabinet's door, 17 deg off after the first fit, its run given
+    no part) and that the fits since have brought onto it gets the path's evidence for the
+    fits after. Returns the names of the joints that got a run."""
+    model, frames = run.model, run.frames
+    if not frames.tool or not model.k:
+        return []
+    times, path, approaches, runs = tool_runs(frames, model.size)
+    first = {int(entry[0][0]) for entries in model.held.values() for entry in entries}
+    kinds = [tool_joint(path[q], model.size, approaches[q])[0] for q in runs]
+    errors, held = carried_runs(model, runs, path, times, kinds)
+    got = []
+    for r, seg in enumerate(runs):
+        if model.times.index(times[seg[0]]) in first or not held[:, r].any():
+            continue
+        k = int(np.argmin(np.where(held[:, r], errors[:, r], np.inf)))
+        _hold(run, k, [times[i] for i in seg], path[seg], approaches[seg], errors[k, r])
+        got.append(model.names[k])
+    return got
 
 
 def held_part(model: ArticulatedSplat, held: np.ndarray, grasp: np.ndarray) -> int | None:

@@ -10,11 +10,13 @@ Steps (each fit is :func:`.fit.fit`):
 1. start from the proposals: part of each Gaussian from the joints' ``extent`` boxes; states
    from the proposal or, where it has none, a search per time; each part trimmed to the
    Gaussians where the frames show it changing (:func:`.seen.trim_parts`);
-2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness);
+2. fit axes, points and states with those parts (coarse-to-fine, graduated robustness); with
+   the robot's tool path, the parts it opened (:func:`.missed.add_tool_parts`);
 3. one joint for parts that move alike (:func:`.hypotheses.merge_duplicates`; again after
    the type choice and before the last steps), type by evidence, then spurious parts
    (:mod:`.hypotheses`);
 4. fit joints, states and soft skinning together; harden the assignment (argmax), fine-tune;
+   runs of the tool path that a joint now carries held by it (:func:`.missed.hold_carried`);
    each Gaussian to the part the frames' depth supports, kept if it lowers the loss
    (:mod:`.assign`); missed parts where the frames change and the model does not
    (:func:`.missed.add_missed`),
@@ -259,6 +261,8 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         merged += hypotheses.merge_duplicates(run, fixed())
     run.done = 0.6
     refine(run, n, share=0.24)
+    if options.parts:     # runs of the tool path that the fits have brought a joint onto
+        missed.hold_carried(run)
     assigned = assign.reassign(run, max(n // 4, 1), 0.04, model.locked.tolist()) \
         if options.assign and model.k else {}
     added: list[str] = []
