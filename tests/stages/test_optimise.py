@@ -1372,3 +1372,39 @@ def test_what_slides_within_its_own_plane_is_not_given_to_a_tool_part(cabinet):
     truth = _surface_labels(cabinet, arrays.means, [door, drawer])
     assert len(moves) > 0.5 * (truth == 2).sum(), (len(moves), (truth == 2).sum())
     assert (truth[moves] == 2).mean() > 0.9, np.bincount(truth[moves], minlength=3)
+
+
+def test_a_piece_the_robot_held_joins_the_door_and_gives_it_the_path(cabinet):
+    """A few Gaussians by the door's handle as a joint of their own, held by the robot's tool
+    along the door's run: at rest or gone they would explain the frames about as well (the
+    door's joint shows their pixels), but the robot's record shows them moving, so they are not
+    removed; in the last test the two become one joint (either joins the other), which holds
+    the run."""
+    from artgs.core.stages.optimise.hypotheses import remove_spurious
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    door = next(j for j in gt if j.type == "revolute")
+    _, run = _runner(capture, gt, gt, OptimiseOptions(iterations=8))
+    model = run.model
+    means = model.splat.means.numpy()
+    handle = np.asarray(door.handle["point"], float)
+    part = np.flatnonzero(model.labels() == model.names.index(door.name) + 1)
+    piece = np.zeros(model.splat.n, bool)
+    piece[part[np.argsort(np.linalg.norm(means[part] - handle, axis=1))[:12]]] = True
+    k = run.add_joint("revolute", door.axis, door.origin, piece)
+    model.set_type(k, "revolute", door.axis, door.origin,
+                   np.array([door.states[t] for t in model.times]))
+    model.harden()
+    ti = [i for i, t in enumerate(model.times) if door.states[t] > 0 or i == 0]
+    path = np.array([(joint_transform("revolute", door.axis, door.origin, door.states[model.times[i]])
+                      @ np.append(handle, 1.0))[:3] for i in ti])
+    model.hold(model.names[k], ti, path)
+    piece_name = model.names[k]
+    assert remove_spurious(run, [False] * model.k) == []
+    assert piece_name in model.names
+    gone = remove_spurious(run, [False] * model.k, join=True)
+    assert len(gone) == 1 and gone[0] in (door.name, piece_name), gone
+    hinge = model.types.index("revolute")
+    assert model.types.count("revolute") == 1 and len(model.held[model.names[hinge]]) == 1
+    assert model.held_residual(hinge) < 0.005

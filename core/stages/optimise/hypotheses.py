@@ -704,7 +704,13 @@ def remove_spurious(run, locked: list[bool], join: bool = False) -> list[str]:
     the frames tell it only weakly (a door opened 10 deg in centimetres of depth noise) the
     joint that explains them best is a better start for the user than none (the PartNet drawer
     unit 20279's drawer, 10 cm out, lost every proposal). It is kept with its name in
-    ``run.weak`` (reported as weak evidence), which holds the joints kept so by this call only."""
+    ``run.weak`` (reported as weak evidence), which holds the joints kept so by this call only.
+
+    A joint whose part the robot's tool held (:attr:`.model.ArticulatedSplat.held`) is not
+    removed at rest or gone: the robot's record shows its part moving. With ``join`` it may
+    join another joint, which, of its type, then holds its runs of the tool path (a realistic
+    robot microwave's door: the piece the hand held, on the path's hinge 0.2 cm from the true
+    one, was removed as gone beside the door's larger piece, whose line stayed 4 cm off)."""
     model, frames = run.model, run.frames
     removed = []
     run.weak = set()
@@ -717,6 +723,10 @@ def remove_spurious(run, locked: list[bool], join: bool = False) -> list[str]:
                 continue
             ids = moving_frames(model, frames, k)
             alts = alternatives(run, k, join)
+            if model.held.get(model.names[k]):     # the robot's record shows it moving
+                alts = [a for a in alts if a[2]]
+                if not alts:
+                    continue
             sel = ids or list(range(len(here)))
             failed = [a for a in alts if not clearly_better(a[1], here, ids)]
             if not failed:
@@ -742,6 +752,9 @@ def remove_spurious(run, locked: list[bool], join: bool = False) -> list[str]:
         removed.append(name)
         if label:
             model.reassign(model.labels() == k + 1, label)
+            if model.types[label - 1] == model.types[k]:    # the runs its part was held along
+                model.held.setdefault(model.names[label - 1], []).extend(
+                    model.held.get(name, []))
         run.drop_joint(k)
         locked = locked[:k] + locked[k + 1:]
         if label:       # the joint refitted with its new Gaussians, as a merge does
