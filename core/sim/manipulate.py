@@ -5,6 +5,10 @@ One episode per joint, in its own ``DIRECT`` client:
 
 - the object URDF is loaded with a fixed base; the operated joint is free, the others are held
   closed; each part weighs ``PART_MASS`` so the outcome measures the joint, not the payload;
+- the gripper approaches the handle along the line the plan starts to move it (``_approaches``:
+  against that motion, so it pulls, or if that tracks worse, with it, so it pushes), not along
+  the handle's stored ``approach`` (a part's estimated normal), which serves only a handle on
+  the hinge's axis;
 - the robot (``pybullet_data``) stands in front of the handle, facing along the approach
   direction; its base is the candidate place that reaches the grasp and from which inverse
   kinematics, followed along the planned handle path (each pose seeded from the last, as the arm
@@ -162,12 +166,6 @@ def run_episode(object_urdf: str, task: Task, robot: str = "franka_panda", frame
         plan_sign = math.copysign(1.0, target_value(task.planned.type, task.planned.limit)
                                   if task.planned.limit != (0.0, 0.0) else 1.0)
         plan_end = plan_sign * OVERSHOOT * abs(target)
-        grasp_pose = _grasp_pose(task.handle, task.approach)
-        duration = 3.0
-        steps, hold = int(duration / DT), int(1.0 / DT)
-        goals = [joint_transform(task.planned.type, task.planned.axis, task.planned.origin,
-                                 plan_end * _min_jerk(min(k / steps, 1.0))) @ grasp_pose
-                 for k in range(steps + hold)]
         # inertia from the links' shapes, not the files: PyBullet rejects xarm6's inertia
         # tensors ("bad inertia tensor", set to zero), which makes its mass matrix singular
         body = p.loadURDF(os.path.join(pybullet_data.getDataPath(), model.urdf),
@@ -175,7 +173,22 @@ def run_episode(object_urdf: str, task: Task, robot: str = "franka_panda", frame
         for i in range(-1, p.getNumJoints(obj, physicsClientId=client)):
             for j in range(-1, p.getNumJoints(body, physicsClientId=client)):
                 p.setCollisionFilterPair(obj, body, i, j, 0, physicsClientId=client)
-        bot = _place_robot(model, body, goals[:steps + 1], client)
+        duration = 3.0
+        steps, hold = int(duration / DT), int(1.0 / DT)
+        best = None
+        for approach in _approaches(task.planned, task.handle, plan_sign, task.approach):
+            grasp_pose = _grasp_pose(task.handle, approach)
+            goals = [joint_transform(task.planned.type, task.planned.axis, task.planned.origin,
+                                     plan_end * _min_jerk(min(k / steps, 1.0))) @ grasp_pose
+                     for k in range(steps + hold)]
+            facing = _facing(task.planned, task.handle, approach)
+            err, base, qs = _place_robot(model, body, goals[:steps + 1], facing, client)
+            if best is None or err < best[0]:
+                best = (err, grasp_pose, goals, facing, base, qs)
+            if err <= TRACKED:
+                break
+        _, grasp_pose, goals, facing, base, qs = best
+        bot = _start(model, body, base, qs, client)
         reach = float(np.linalg.norm(bot.ee_pose()[:3, 3] - grasp_pose[:3, 3]))
         if reach > 0.02:
             return Outcome(task.true_joint, False, 0.0, target, False,
@@ -188,7 +201,7 @@ def run_episode(object_urdf: str, task: Task, robot: str = "franka_panda", frame
         p.changeConstraint(cid, maxForce=GRASP_FORCE, physicsClientId=client)
 
         shots = set(np.linspace(0, steps + hold - 1, frames).round().astype(int).tolist())
-        camera = _camera(task.handle, task.approach, goals[-1][:3, 3], size)
+        camera = _camera(task.handle, facing, goals[-1][:3, 3], size)
         images, lost, worst, reached, held = [], False, 0.0, 0.0, 0.0
         for k, (goal, speed) in enumerate(zip(goals, _velocities(goals))):
             worst = max(worst, bot.impedance_step(goal, speed))
@@ -344,11 +357,14 @@ def _min_jerk(s: float) -> float:
     return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
 
 
-def _place_robot(model: RobotModel, body: int, goals: list[np.ndarray], client: int) -> _Robot:
-    """The robot at the candidate base that follows the planned gripper path ``goals`` (one pose
-    per control step) best.
+def _place_robot(model: RobotModel, body: int, goals: list[np.ndarray], facing: np.ndarray,
+                 client: int) -> tuple[float, np.ndarray, list[np.ndarray]]:
+    """The candidate base that follows the planned gripper path ``goals`` (one pose per control
+    step) best: (its worst tracking error in the rehearsal, the base, the arm's poses along the
+    path from inverse kinematics).
 
-    Candidates in front of the path are ranked by inverse kinematics along the path (seeded from
+    Candidates in front of the path (behind it along ``facing``, the horizontal direction the
+    robot faces) are ranked by inverse kinematics along the path (seeded from
     the rest pose, and again each pose from the last), first by reaching the grasp, then by the
     worst miss and joint-limit margin; in that order, distinct bases then rehearse the whole path
     under the impedance controller without the object (collisions with it are off) until one
@@ -360,9 +376,7 @@ def _place_robot(model: RobotModel, body: int, goals: list[np.ndarray], client: 
 
     path = goals[::max(1, len(goals) // 6)] + [goals[-1]]
     start, end = path[0][:3, 3], path[-1][:3, 3]
-    approach = path[0][:3, 2].copy()
-    approach[2] = 0.0
-    approach = approach / max(np.linalg.norm(approach), 1e-9)
+    approach = facing
     side = np.cross([0.0, 0.0, 1.0], approach)
     mid = (start + end) / 2
     orn = p.getQuaternionFromEuler([0, 0, math.atan2(approach[1], approach[0])])
@@ -396,7 +410,7 @@ def _place_robot(model: RobotModel, body: int, goals: list[np.ndarray], client: 
             best, best_err = (base, qs), err
     p.restoreState(saved, physicsClientId=client)
     p.removeState(saved, physicsClientId=client)
-    return _start(model, body, best[0], best[1], client)
+    return best_err, best[0], best[1]
 
 
 def _ik_score(robot: "_Robot", path: list[np.ndarray], sequential: bool) -> tuple:
@@ -433,6 +447,39 @@ def _start(model: RobotModel, body: int, base: np.ndarray, qs: list[np.ndarray],
                           physicsClientId=client)
     robot.release_motors()
     return robot
+
+
+def _approaches(planned: Joint, handle: np.ndarray, sign: float, given: np.ndarray
+                ) -> list[np.ndarray]:
+    """The gripper's approaches (unit, towards the part) to try, in order: along the line in
+    which the plan starts to move the handle (a hinge's handle along axis x lever, a slide's along
+    its axis), first against that motion (the gripper pulls straight back along its own axis),
+    then with it (it pushes a part that opens away from where it stands), whatever the part's
+    surface normal was estimated to be (a handle's stored approach, from a part's mixed normals,
+    can be 90 degrees off or reversed). Only the ``given`` approach when the handle lies on the
+    hinge's axis (no direction of motion)."""
+    axis = np.asarray(planned.axis, float) / np.linalg.norm(planned.axis)
+    line = np.cross(axis, handle - np.asarray(planned.origin, float)) \
+        if planned.type == "revolute" else axis
+    norm = float(np.linalg.norm(line))
+    if norm < 1e-6:
+        return [np.asarray(given, float) / np.linalg.norm(given)]
+    pull = sign * line / norm
+    return [-pull, pull]
+
+
+def _facing(planned: Joint, handle: np.ndarray, approach: np.ndarray) -> np.ndarray:
+    """Horizontal unit direction the robot faces: the approach's horizontal part; for a lid
+    (an approach within ~70 degrees of vertical) from beyond the handle towards the hinge."""
+    flat = np.array([approach[0], approach[1], 0.0])
+    if np.linalg.norm(flat) < 0.35 and planned.type == "revolute":
+        lever = np.asarray(planned.origin, float) - handle
+        lever[2] = 0.0
+        if np.linalg.norm(lever) > 1e-6:
+            flat = lever
+    if np.linalg.norm(flat) < 1e-9:
+        flat = np.array([1.0, 0.0, 0.0])
+    return flat / np.linalg.norm(flat)
 
 
 def _grasp_pose(handle: np.ndarray, approach: np.ndarray) -> np.ndarray:
@@ -474,14 +521,12 @@ def _point(pos, orn, local, client: int) -> np.ndarray:
     return np.array(p.multiplyTransforms(pos, orn, local, [0, 0, 0, 1])[0])
 
 
-def _camera(handle: np.ndarray, approach: np.ndarray, end: np.ndarray, size) -> tuple:
+def _camera(handle: np.ndarray, facing: np.ndarray, end: np.ndarray, size) -> tuple:
     """View and projection matrices looking at the handle's path from the robot's side, above."""
     import pybullet as p
 
     centre = (np.asarray(handle) + np.asarray(end)) / 2
-    a = np.asarray(approach, float).copy()
-    a[2] = 0
-    a /= max(np.linalg.norm(a), 1e-9)
+    a = facing
     side = np.cross([0.0, 0.0, 1.0], a)
     eye = centre - 1.6 * a + 1.0 * side + np.array([0.0, 0.0, 0.8])
     view = p.computeViewMatrix(eye.tolist(), centre.tolist(), [0, 0, 1])

@@ -74,3 +74,23 @@ def test_an_axis_15_degrees_off_fails(cabinet, tmp_path, robot):
     for name, r in figures["joints"].items():
         # it fails because the plan leaves the true path, not because the handle was unreachable
         assert not r["success"] and r["grasp_lost"], (robot, name, r)
+
+
+def test_the_gripper_approaches_along_the_plans_motion_not_the_stored_normal(cabinet, tmp_path):
+    """A handle's stored approach (a part's mean surface normal) can be 90 degrees off or
+    reversed: the gripper approaches along the line the plan moves the handle, so the true
+    joints still open every part."""
+    art = read_articulation(cabinet / layout.ARTICULATION)
+    for j in art.joints:            # the approach pointing up, then sideways and outwards
+        j.handle = {**j.handle, "approach": [0.0, 0.0, 1.0]}
+    first = art.joints[0]
+    first.handle["approach"] = [float(x) for x in np.cross(first.axis, [0.0, 0.0, 1.0])
+                                - first.axis]
+    out = tmp_path / "up"
+    out.mkdir()
+    write_articulation(out / layout.PROPOSALS, art)
+    figures = run_stage("check", out, CheckOptions(urdf=str(cabinet / "gt.urdf"), frames=0),
+                        Progress("quiet"))
+    for j in art.joints:
+        r = figures["joints"][j.name]
+        assert r["success"] and not r["grasp_lost"], (j.name, r)
