@@ -180,6 +180,17 @@ def joint_transform(kind: str, axis: np.ndarray, origin: np.ndarray, value: floa
     return T
 
 
+def motion_direction(kind: str, axis: np.ndarray, origin: np.ndarray, point: np.ndarray
+                     ) -> np.ndarray | None:
+    """Unit direction in which ``point`` on a joint's part starts to move as the joint's value
+    grows from 0: a hinge's axis x lever, a slide's axis; None for a point on a hinge's axis."""
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    line = np.cross(axis, np.asarray(point, float) - np.asarray(origin, float)) \
+        if kind == "revolute" else axis
+    norm = float(np.linalg.norm(line))
+    return line / norm if norm > 1e-6 else None
+
+
 def _finite(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 

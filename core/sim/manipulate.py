@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model.joints import Joint, joint_transform
+from ..model.joints import Joint, joint_transform, motion_direction
 
 DT = 1.0 / 240.0
 GRASP_FORCE = 70.0          # N
@@ -458,14 +458,10 @@ def _approaches(planned: Joint, handle: np.ndarray, sign: float, given: np.ndarr
     surface normal was estimated to be (a handle's stored approach, from a part's mixed normals,
     can be 90 degrees off or reversed). Only the ``given`` approach when the handle lies on the
     hinge's axis (no direction of motion)."""
-    axis = np.asarray(planned.axis, float) / np.linalg.norm(planned.axis)
-    line = np.cross(axis, handle - np.asarray(planned.origin, float)) \
-        if planned.type == "revolute" else axis
-    norm = float(np.linalg.norm(line))
-    if norm < 1e-6:
+    line = motion_direction(planned.type, planned.axis, planned.origin, handle)
+    if line is None:
         return [np.asarray(given, float) / np.linalg.norm(given)]
-    pull = sign * line / norm
-    return [-pull, pull]
+    return [-sign * line, sign * line]
 
 
 def _facing(planned: Joint, handle: np.ndarray, approach: np.ndarray) -> np.ndarray:

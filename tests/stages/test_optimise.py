@@ -253,6 +253,10 @@ def test_recovers_perturbed_joints(cabinet, tmp_path):
         assert err < tol, (j.name, err)
         assert j.limit[0] <= 0 and abs(j.limit[1] - true.limit[1]) < tol
         assert 0 <= j.confidence <= 1 and j.extra["residual"] >= 0
+        # approached against the handle's opening motion: the true handle's front normal
+        a, b = np.asarray(j.handle["approach"]), np.asarray(true.handle["approach"])
+        assert np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(b), -1, 1))) < 10.0, (a, b)
+        assert abs(np.linalg.norm(a) - 1) < 1e-6
 
 
 def test_locked_joint_stays_put(cabinet, tmp_path):

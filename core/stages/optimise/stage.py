@@ -46,7 +46,8 @@ from ...geometry.parts import assign_parts, handle_point
 from ...model import atomic, layout, registry
 from ...model.capture import TRANSFORMS, Capture
 from ...model.errors import InputError, NothingFound
-from ...model.joints import Articulation, Joint, read_articulation, write_articulation
+from ...model.joints import (Articulation, Joint, motion_direction, read_articulation,
+                             write_articulation)
 from ...model.ply import read_ply
 from ...model.progress import Progress
 from ...model.registry import OptimiseOptions
@@ -416,6 +417,9 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             confidence *= 0.5
         handle = src.handle if handle_holds(src, kind, pts, model.size) else \
             grasp(model, k, pts, axis, origin, means)
+        pull = motion_direction(kind, axis, origin, handle["point"]) if handle else None
+        if pull is not None:   # approached against the opening (opening is positive here)
+            handle = {**handle, "approach": [float(x) for x in -pull]}
         extra = {key: v for key, v in src.extra.items() if key != "alternative"} if src else {}
         extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
                      evidence=ev, warnings=warnings, into_body=round(inside, 4))
@@ -449,7 +453,8 @@ def grasp(model: ArticulatedSplat, k: int, pts: np.ndarray, axis: np.ndarray,
     """A handle for a joint whose start gave none that holds (:func:`handle_holds`; a part the
     optimisation added, a type changed): the grasp point of :func:`handle_point` on the part's
     front (its mean normal, turned away from the object's centre), approached against that
-    normal. None for a part without Gaussians."""
+    normal (:func:`export` then turns every handle's approach against its opening motion, which
+    a part's mixed normals can miss by 90 degrees). None for a part without Gaussians."""
     from .hypotheses import part_normal
     if len(pts) < 3:
         return None
