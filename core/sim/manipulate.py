@@ -376,15 +376,14 @@ def _place_robot(model: RobotModel, body: int, goals: list[np.ndarray], facing: 
 
     path = goals[::max(1, len(goals) // 6)] + [goals[-1]]
     start, end = path[0][:3, 3], path[-1][:3, 3]
-    approach = facing
-    side = np.cross([0.0, 0.0, 1.0], approach)
+    side = np.cross([0.0, 0.0, 1.0], facing)
     mid = (start + end) / 2
-    orn = p.getQuaternionFromEuler([0, 0, math.atan2(approach[1], approach[0])])
+    orn = p.getQuaternionFromEuler([0, 0, math.atan2(facing[1], facing[0])])
     ranked = []
     for d in (0.35, 0.5, 0.65, 0.8):
         for lateral in (-0.2, 0.0, 0.2):
             for dz in (-0.6, -0.4, -0.2):
-                base = mid - d * approach + lateral * side
+                base = mid - d * facing + lateral * side
                 base[2] = mid[2] + dz
                 p.resetBasePositionAndOrientation(body, base.tolist(), orn,
                                                   physicsClientId=client)
@@ -522,9 +521,8 @@ def _camera(handle: np.ndarray, facing: np.ndarray, end: np.ndarray, size) -> tu
     import pybullet as p
 
     centre = (np.asarray(handle) + np.asarray(end)) / 2
-    a = facing
-    side = np.cross([0.0, 0.0, 1.0], a)
-    eye = centre - 1.6 * a + 1.0 * side + np.array([0.0, 0.0, 0.8])
+    side = np.cross([0.0, 0.0, 1.0], facing)
+    eye = centre - 1.6 * facing + 1.0 * side + np.array([0.0, 0.0, 0.8])
     view = p.computeViewMatrix(eye.tolist(), centre.tolist(), [0, 0, 1])
     proj = p.computeProjectionMatrixFOV(60, size[0] / size[1], 0.05, 10.0)
     return view, proj
