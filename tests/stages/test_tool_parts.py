@@ -246,3 +246,23 @@ def test_a_run_is_held_once_a_fit_brings_a_joint_onto_it():
         assert hold_carried(run) == expected
         assert len(run.model.held.get("door", [])) == len(expected)
         assert hold_carried(run) == []
+
+
+def test_a_joint_takes_the_runs_of_a_piece_of_its_type_only():
+    """The runs a piece was held along pass to the hinge it joins (their tool positions then
+    carried by that hinge), not to a slide (they would bend it towards a line)."""
+    times = list(range(4))
+    door = Joint("door", "revolute", np.array([0.0, 0.0, 1.0]), np.zeros(3),
+                 states={t: 0.2 * t for t in times})
+    model = _held_model(door, times)
+    model.harden()
+    model.add("piece", "revolute", door.axis, door.origin, np.arange(200) % 4 == 1)
+    model.add("slide", "prismatic", np.array([1.0, 0.0, 0.0]), np.zeros(3),
+              np.arange(200) % 4 == 3)
+    path = np.array([[np.cos(0.2 * t), np.sin(0.2 * t), 0.0] for t in times])
+    model.hold("piece", times, path)
+    model.pass_runs(1, 2)
+    assert "slide" not in model.held
+    model.pass_runs(1, 0)
+    assert len(model.held["door"]) == 1
+    assert np.allclose(model.held["door"][0][1].numpy(), path)

@@ -752,9 +752,7 @@ def remove_spurious(run, locked: list[bool], join: bool = False) -> list[str]:
         removed.append(name)
         if label:
             model.reassign(model.labels() == k + 1, label)
-            if model.types[label - 1] == model.types[k]:    # the runs its part was held along
-                model.held.setdefault(model.names[label - 1], []).extend(
-                    model.held.get(name, []))
+            model.pass_runs(k, label - 1)
         run.drop_joint(k)
         locked = locked[:k] + locked[k + 1:]
         if label:       # the joint refitted with its new Gaussians, as a merge does

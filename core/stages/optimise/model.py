@@ -354,6 +354,12 @@ class ArticulatedSplat:
              torch.as_tensor(np.asarray(positions, float), **f),
              None if approaches is None else torch.as_tensor(approaches, **f)))
 
+    def pass_runs(self, k: int, j: int) -> None:
+        """Joint ``j`` also holds the runs joint ``k``'s part was held along (:attr:`held`) when
+        it is of ``k``'s type (a slide's runs would bend a hinge towards a line)."""
+        if self.types[j] == self.types[k]:
+            self.held.setdefault(self.names[j], []).extend(self.held.get(self.names[k], []))
+
     def held_back(self, k: int) -> list[tuple[torch.Tensor, torch.Tensor | None]]:
         """Per run joint ``k``'s part was held along (:attr:`held`): its tool positions carried
         back to the closed pose by the joint's motion at their times (M,3; a rigid grasp
