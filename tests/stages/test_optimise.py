@@ -584,7 +584,8 @@ def test_pieces_of_one_door_become_one_joint(cabinet, tmp_path):
 def test_a_trusted_joint_takes_a_piece_that_moves_alike(cabinet):
     """The door as two pieces on its true joint, the larger piece's joint free and the smaller
     one's trusted (a part the robot opened, a user's joint): the free piece joins the trusted
-    joint, which keeps its name, and not the other way round."""
+    joint, which keeps its name, and not the other way round; the robot's run along the
+    merged piece passes to that joint."""
     from artgs.core.stages.optimise.hypotheses import merge_duplicates
 
     run = _pieces_run(cabinet, 0.0, 0.0)
@@ -592,9 +593,18 @@ def test_a_trusted_joint_takes_a_piece_that_moves_alike(cabinet):
     counts = np.bincount(run.model.labels(), minlength=4)[2:]
     small, large = ("upper", "lower") if counts[0] < counts[1] else ("lower", "upper")
     fixed = [False] + [name == small for name in run.model.names[1:]]
+    door = next(j for j in read_articulation(cabinet / "gt.json").joints if j.type == "revolute")
+    piece = run.model.labels() == run.model.names.index(large) + 1
+    grasp = np.append(run.model.splat.means[piece].mean(0).numpy(), 1.0)
+    ti = list(range(len(run.frames.times)))
+    path = np.array([(joint_transform("revolute", door.axis, door.origin,
+                                      door.states[run.frames.times[i]]) @ grasp)[:3] for i in ti])
+    run.model.hold(large, ti, path)
     merged = merge_duplicates(run, fixed)
     assert merged == [[small, large]], merged
     assert run.model.names[1:] == [small]
+    assert large not in run.model.held and len(run.model.held[small]) == 1
+    assert np.allclose(run.model.held[small][0][1].numpy(), path)
 
 
 def test_one_joint_takes_a_piece_its_own_fit_moves_wrongly(cabinet):

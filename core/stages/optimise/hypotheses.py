@@ -922,7 +922,9 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
     (:func:`one_explains_both`) takes both. ``fixed`` joints (trusted user joints, locked ones,
     parts the robot opened) are never merged into another, and keep their own joint when a
     piece that moves alike joins them (a leftover of a door the robot's path gave its own
-    part stayed as an extra joint). Returns ``[kept, merged]`` name pairs. The model must be hardened."""
+    part stayed as an extra joint). The runs of the robot's tool path the merged piece was held
+    along pass to the joint it joins (:meth:`.model.ArticulatedSplat.pass_runs`). Returns
+    ``[kept, merged]`` name pairs. The model must be hardened."""
     model, frames = run.model, run.frames
     merged: list[list[str]] = []
     fixed = list(fixed)
@@ -942,6 +944,7 @@ def merge_duplicates(run, fixed: list[bool]) -> list[list[str]]:
         fits = joint_for_both(model, i, j)
         ids = sorted(set(moving_frames(model, frames, i)) | set(moving_frames(model, frames, j)))
         model.reassign(model.labels() == j + 1, i + 1)
+        model.pass_runs(j, i)      # the robot's runs along the piece: the joint moves it now
         names = model.names[i], model.names[j]
         run.drop_joint(j)
         del fixed[j]
