@@ -330,6 +330,14 @@ def carried_runs(model: ArticulatedSplat, runs: list[np.ndarray], path: np.ndarr
         errors <= np.minimum(TOOL_TOL * model.size, CARRIED * spans))
 
 
+def carrier(errors: np.ndarray, held: np.ndarray, r: int) -> int | None:
+    """The joint that carries run ``r`` best (least error among those that carry it, by
+    :func:`carried_runs`' ``errors`` and ``held``), or None when none does."""
+    if not held[:, r].any():
+        return None
+    return int(np.argmin(np.where(held[:, r], errors[:, r], np.inf)))
+
+
 def run_states(along: np.ndarray, ts: list[int], times: list[int]) -> list[np.ndarray]:
     """Candidate states at ``times`` of a joint read off one tool run (values ``along`` at the
     run's times ``ts``, 0 before, held after): as read, and with either end continued by its
@@ -385,8 +393,8 @@ def add_tool_parts(run, share: float) -> list[str]:
         approach = approaches[seg]
         ti = [model.times.index(t) for t in ts]
         errors, held = carried_runs(model, runs, path, times, [j[0] for j in joints])
-        if held[:, r].any():
-            k = int(np.argmin(np.where(held[:, r], errors[:, r], np.inf)))
+        k = carrier(errors, held, r)
+        if k is not None:
             _hold(run, k, ts, P, approach, errors[k, r])
             continue
         joint = joints[r]
@@ -467,9 +475,9 @@ def hold_carried(run) -> list[str]:
     errors, held = carried_runs(model, runs, path, times, kinds)
     got = []
     for r, seg in enumerate(runs):
-        if model.times.index(times[seg[0]]) in first or not held[:, r].any():
+        k = carrier(errors, held, r)
+        if model.times.index(times[seg[0]]) in first or k is None:
             continue
-        k = int(np.argmin(np.where(held[:, r], errors[:, r], np.inf)))
         _hold(run, k, [times[i] for i in seg], path[seg], approaches[seg], errors[k, r])
         got.append(model.names[k])
     return got
