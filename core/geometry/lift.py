@@ -13,7 +13,8 @@
   edges' midpoints lifted onto the part's plane), pointing towards the camera (pulling out), made
   level when within :data:`AXIS_SNAP_DEG` of it.
 - Handle: the 3D centre of the handle box's pixels (those standing out of the part's plane if
-  any), approached along minus the part's normal.
+  any), approached along minus the part's normal (the VLM route then turns it against the
+  joint's opening motion, as every route writes it).
 - Extent: the part box's corners lifted onto the plane, a thin oriented box around the front
   (:data:`FRONT_MARGIN` in front for handles, :data:`BACK_MARGIN` behind).
 """

@@ -191,6 +191,17 @@ def motion_direction(kind: str, axis: np.ndarray, origin: np.ndarray, point: np.
     return line / norm if norm > 1e-6 else None
 
 
+def opening_approach(kind: str, axis: np.ndarray, origin: np.ndarray, point: np.ndarray,
+                     opening: float) -> np.ndarray | None:
+    """A handle's approach: against the motion that opens the part (``opening``, the joint's
+    value when open; its sign says which way the part opens) at ``point``
+    (:func:`motion_direction`). None for a point on a hinge's axis or no opening."""
+    pull = motion_direction(kind, axis, origin, point)
+    if pull is None or not opening:
+        return None
+    return -math.copysign(1.0, opening) * pull
+
+
 def _finite(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 

@@ -87,3 +87,19 @@ def test_prismatic_transform_translates_along_axis():
     T = Joint("d", "prismatic", [0, 3, 0], [5, 5, 5]).transform(0.25)
     np.testing.assert_allclose(T[:3, 3], [0, 0.25, 0])
     np.testing.assert_allclose(T[:3, :3], np.eye(3))
+
+
+def test_a_handle_is_approached_against_the_motion_that_opens_its_part():
+    """A door on a vertical hinge at x = 0, handle at x = 0.5 on its front (y = 0): opened by a
+    positive angle the handle first moves to +y, so the gripper comes from +y towards -y;
+    opened by a negative one, the other way; a handle on the hinge's line has no such
+    direction, nor does a part that never opens."""
+    from artgs.core.model.joints import opening_approach
+
+    axis, origin, handle = np.array([0.0, 0.0, 1.0]), np.zeros(3), np.array([0.5, 0.0, 0.3])
+    assert np.allclose(opening_approach("revolute", axis, origin, handle, 1.2), [0, -1, 0])
+    assert np.allclose(opening_approach("revolute", axis, origin, handle, -1.2), [0, 1, 0])
+    assert np.allclose(opening_approach("prismatic", [0, 2.0, 0], origin, handle, 0.3),
+                       [0, -1, 0])
+    assert opening_approach("revolute", axis, origin, np.array([0.0, 0.0, 0.7]), 1.0) is None
+    assert opening_approach("revolute", axis, origin, handle, 0.0) is None

@@ -65,6 +65,10 @@ def _check(joints, gt, scores, max_ae, max_oe, max_state_rev, max_state_pri):
         local_h = (h - ext["center"]) @ np.asarray(ext["axes"]).T
         assert np.all(np.abs(local_h) <= np.asarray(ext["half_size"]) + 0.02)
         assert abs(np.linalg.norm(pred.handle["approach"]) - 1) < 1e-6
+        # approached against the opening motion: the true handle's approach, into its front
+        cos = np.dot(pred.handle["approach"], true.handle["approach"]) / \
+            np.linalg.norm(true.handle["approach"])
+        assert np.degrees(np.arccos(np.clip(cos, -1, 1))) < 10.0, (s, pred.handle)
 
 
 @pytest.fixture(scope="module")

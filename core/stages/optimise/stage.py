@@ -46,7 +46,7 @@ from ...geometry.parts import assign_parts, handle_point
 from ...model import atomic, layout, registry
 from ...model.capture import TRANSFORMS, Capture
 from ...model.errors import InputError, NothingFound
-from ...model.joints import (Articulation, Joint, motion_direction, read_articulation,
+from ...model.joints import (Articulation, Joint, opening_approach, read_articulation,
                              write_articulation)
 from ...model.ply import read_ply
 from ...model.progress import Progress
@@ -417,9 +417,9 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
             confidence *= 0.5
         handle = src.handle if handle_holds(src, kind, pts, model.size) else \
             grasp(model, k, pts, axis, origin, means)
-        pull = motion_direction(kind, axis, origin, handle["point"]) if handle else None
-        if pull is not None:   # approached against the opening (opening is positive here)
-            handle = {**handle, "approach": [float(x) for x in -pull]}
+        approach = opening_approach(kind, axis, origin, handle["point"], hi) if handle else None
+        if approach is not None:
+            handle = {**handle, "approach": [float(x) for x in approach]}
         extra = {key: v for key, v in src.extra.items() if key != "alternative"} if src else {}
         extra.update(residual=residual, observed_range=[lo, hi], gaussians=int(len(pts)),
                      evidence=ev, warnings=warnings, into_body=round(inside, 4))

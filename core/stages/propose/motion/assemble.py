@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ....model.joints import Joint, joint_transform
+from ....model.joints import Joint, joint_transform, opening_approach
 from ....geometry.parts import handle_point
 from ....geometry.rigid import StepData, apply, invert, refine_joint, tukey_weights
 from .cameras import InteractionView
@@ -121,8 +121,12 @@ def make_joint(k: int, fit, values: dict[int, float], moving: list[int], S: np.n
     extent = {"center": [float(x) for x in centre],
               "axes": [[float(x) for x in r] for r in box_axes],
               "half_size": [float(x) for x in (bhi - blo) / 2]}
-    handle = {"point": [float(x) for x in handle_point(S, fit, n)],
-              "approach": [float(x) for x in -n]}
+    point = handle_point(S, fit, n)
+    approach = opening_approach(fit.type, fit.axis, fit.origin, point,
+                                max(values.values(), key=abs))
+    if approach is None:         # on the hinge's line: against the front's normal
+        approach = -n
+    handle = {"point": [float(x) for x in point], "approach": [float(x) for x in approach]}
     v0 = views[0]
     uv, _ = v0.camera.project(_corners(centre, box_axes, (bhi - blo) / 2))
     size = np.array([v0.camera.width, v0.camera.height], float)

@@ -25,7 +25,7 @@ from ....model.cameras import Camera, intrinsics, look_at
 from ....model.capture import Capture
 from ....render.device import resolve_device
 from ....render.gaussians import Gaussians
-from ....model.joints import Joint
+from ....model.joints import Joint, opening_approach
 from ....model.progress import Progress
 from ....render.rasterize import render
 from .client import VlmConfig, assistant_message, chat, user_message
@@ -134,6 +134,10 @@ def part_joint(camera: Camera, depth: np.ndarray, part: PartAnswer, handle_answe
             progress.log(f"part {part.index} ({part.label}): handle not used: {reason}", "info")
         else:
             handle = lift.handle(camera, depth, hbox, plane)
+            approach = opening_approach(part.joint_type, axis, origin, np.array(handle["point"]),
+                                        limit[1])
+            if approach is not None:     # against the opening, as every route writes it
+                handle["approach"] = [float(x) for x in approach]
     base = re.sub(r"\W+", "_", part.label).strip("_") or "part"
     name, n = f"{base}_{part.index}", part.index
     while name in taken:
