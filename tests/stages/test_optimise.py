@@ -756,33 +756,6 @@ def test_first_mover_splits_by_onset_and_keeps_a_spread_group_whole():
     assert got is not None and len(got) == len(a)
 
 
-def test_gaussians_changed_before_a_joint_moves_them_are_told_apart(cabinet):
-    """A part hypothesis holding the door and the drawer, fitted as the drawer's slide (which
-    moves from time 4, the door from time 1): the door's Gaussians, changed at times 1-2 when
-    the slide has not moved them, are told apart; the drawer's, changed at times 4-5, are not."""
-    from artgs.core.geometry.parts import assign_parts
-    from artgs.core.stages.optimise.frames import interaction_frames
-    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
-    from artgs.core.stages.optimise.seen import changed_before
-    from artgs.core.stages.optimise.stage import object_size
-    gt = read_articulation(cabinet / "gt.json")
-    door, drawer = (next(j for j in gt.joints if j.type == t) for t in ("revolute", "prismatic"))
-    arrays = initial_splats(load_capture(cabinet).static)[0]
-    frames = interaction_frames(load_capture(cabinet), torch.device("cpu"))
-    truth = assign_parts(arrays.means, [door, drawer])
-    both = truth > 0
-    model = ArticulatedSplat(Splat.from_arrays(arrays, torch.device("cpu")), [drawer],
-                             frames.times, both.astype(int), object_size(arrays.means), [False])
-    model.hard = torch.as_tensor(both.astype(int))
-    assert drawer.states[1] == drawer.states[3] == 0.0 and door.states[1] > 0.5
-    hits = np.zeros((len(frames.times) - 1, len(truth)), bool)
-    hits[1:3, truth == 1] = True            # the door changes at times 1, 2 and 3
-    hits[4, truth == 2] = True              # the drawer at times 4 and 5
-    early = changed_before(model, frames, 0, hits, both)
-    assert early[truth == 1].mean() > 0.9 and early[truth == 2].mean() < 0.1
-    assert not early[~both].any()
-
-
 def test_true_joints_gain_no_part(cabinet, tmp_path):
     """Given the true joints, the missed-part search invents nothing and no part is removed: the
     frames' unexplained pixels (an inside the closed splat lacks, small registration errors) are
