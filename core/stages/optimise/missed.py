@@ -14,7 +14,7 @@ from .hypotheses import (REMOVE_TOL, clearly_better, hidden_share, hinge_lines, 
 from .kinematics import PRISMATIC, REVOLUTE
 from .model import ArticulatedSplat, restore, snapshot, unshaded
 from .plausible import HIDDEN_SHARE, little_motion, off_part
-from .seen import changed_before, seen_static, unexplained
+from .seen import seen_static, unexplained
 
 
 def clusters(points: np.ndarray, min_size: int) -> list[np.ndarray]:
@@ -62,21 +62,22 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
     """Missed parts, one at a time: Gaussians of the base where the frames show changes the model
     does not (:func:`unexplained`), grouped into connected clusters (at least 1 % of the
     Gaussians), of which the part that starts moving first (:func:`first_mover`) becomes a part
-    hypothesis (:func:`_fit_missed`), kept only if it clearly lowers the image loss of the
-    frames where it moves (:func:`clearly_better`) and its motion is plausible
-    (:func:`implausible`). A rejected hypothesis whose part holds Gaussians that changed before
-    its fitted joint moves them (:func:`.seen.changed_before`: a touching part that started
-    moving a little earlier) is tried once more without them, which stay free for the next
-    attempts. A kept part explains its changes (and those of what it hid), so the changes are
-    found again before the next of at most ``tries`` attempts; a rejected cluster is left out
-    of the next ones (the frames may show another part moving beside a piece no joint
-    explains). Returns the names of the added joints."""
-    model = run.model
+    hypothesis: hinges at its box edges and slides along its normal and box axes are scored by
+    rendering at its key time (:func:`.hypotheses.key_time`, among the times its Gaussians
+    change), the best is fitted (then, if needed, the best of the other type), and the part is
+    kept only if it clearly lowers the image loss of the frames where it moves
+    (:func:`clearly_better`) and its motion is plausible (:func:`implausible`). A kept
+    part explains its changes (and those of what it hid), so the changes are found again before
+    the next of at most ``tries`` attempts; a rejected cluster is left out of the next ones (the
+    frames may show another part moving beside a piece no joint explains). Returns the names of
+    the added joints."""
+    model, frames, cfg = run.model, run.frames, run.cfg
     means = model.splat.means.cpu().numpy().astype(float)
     added: list[str] = []
     tried = np.zeros(model.splat.n, bool)
+    steps = max(run.options.iterations // 2, 1)
     for attempt in range(tries):
-        hits = unexplained(model, run.frames, run.cfg)
+        hits = unexplained(model, frames, cfg)
         flagged = np.flatnonzero(hits.any(0) & ~tried)
         g = first_mover(means[flagged], hits[:, flagged].argmax(0),
                         max(10, model.splat.n // 100))
@@ -86,22 +87,54 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         members[flagged[g]] = True
         with unshaded(model):
             before_frames = run.evaluate()
+        before = float(before_frames.mean())
         kept = snapshot(model)
-        k, after, early = _fit_missed(run, members, hits, before_frames, share / tries / 2)
-        if k is None and early is not None:
-            restore(model, kept)
-            run.progress.log(f"{int(early.sum())} of those {int(members.sum())} Gaussians "
-                             f"changed before the fitted joint moves them; tried again "
-                             f"without them")
-            members &= ~early
-            k, after, _ = _fit_missed(run, members, hits, before_frames, share / tries / 2)
-            tried |= members
-        elif k is None:
-            tried |= members
-        if k is None:
-            restore(model, kept)
-            continue
+        k = run.add_joint(REVOLUTE, np.array([0.0, 0.0, 1.0]), means[members].mean(0), members)
         name = model.names[k]
+        pts = part_points(model, k)
+        hyps = [(REVOLUTE, a, p) for a, p in hinge_lines(model, pts)]
+        hyps += [(PRISMATIC, d, pts.mean(0)) for d in
+                 [part_normal(model, k)] + list(np.linalg.svd(pts - pts.mean(0))[2])]
+        # scored where its own Gaussians change (hits' row r: times r and r + 1)
+        key = key_time(run, k, np.concatenate([[0.0], hits[:, members].mean(1)]))
+        scored = []
+        for kind, axis, point in hyps:
+            model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+            scored.append((score_at(model, frames, cfg, k, key, state_candidates(model, k))[0],
+                           kind, axis, point))
+            run.progress.check_cancel()
+        # the best-scoring hypothesis is fitted; if it does not explain the frames better or
+        # moves implausibly, the best of the other type is (a small part's score at one time
+        # can mislead)
+        order = sorted(scored, key=lambda s: s[0])
+        first = order[0][1]
+        second = [s for s in order if s[1] != first][:1]
+        for _, kind, axis, point in order[:1] + second:
+            model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
+            search_states(model, frames, k, cfg, state_candidates(model, k))
+            run.run_fit(steps, f"new part {name} as {kind}", share / tries / 2,
+                        free=[i == k for i in range(model.k)], coarse=cfg.coarse,
+                        coarse_level=part_level(model, frames, k))
+            with unshaded(model):
+                after_frames = run.evaluate()
+            after = float(after_frames.mean())
+            # a part the optimisation invents has only the loss it lowers as evidence: over
+            # all frames, not on the frames it picks itself (the local test is for proposals)
+            gain = clearly_better(before_frames, after_frames, [])
+            run.progress.log(f"{name}: {len(g)} Gaussians where the frames change and the "
+                             f"model does not; as a {kind} part the image loss is {after:.5f} "
+                             f"(without {before:.5f})")
+            why = implausible(model, k) if gain else None
+            if why:
+                gain = False
+                run.progress.log(f"{name}: not added as a {kind} part, {why}")
+            if gain:
+                break
+        if not gain:
+            run.drop_joint(k)
+            restore(model, kept)
+            tried |= members
+            continue
         into = merge_target(run, k, after)
         if into is None:
             added.append(name)
@@ -112,65 +145,6 @@ def add_missed(run, share: float, tries: int = 3) -> list[str]:
         run.drop_joint(k)
         restore(model, tuple(part[:-1] for part in fitted))    # every joint's but the last
     return added
-
-
-def _fit_missed(run, members: np.ndarray, hits: np.ndarray, before_frames: np.ndarray,
-                share: float) -> tuple[int | None, float, np.ndarray | None]:
-    """A new joint for the Gaussians ``members``: hinges at its box edges and slides along its
-    normal and box axes scored by rendering at its key time (:func:`.hypotheses.key_time`,
-    among the times its Gaussians change), the best fitted (then, if it does not explain the
-    frames clearly better than ``before_frames`` or moves implausibly, the best of the other
-    type: a small part's score at one time can mislead). Returns the new joint's index and
-    its image loss, or (None, 0, the members that changed before the first fit moves them, if
-    they are at least 10 % and at most 50 % of the part) with the joint dropped."""
-    model, frames, cfg = run.model, run.frames, run.cfg
-    means = model.splat.means.cpu().numpy().astype(float)
-    steps = max(run.options.iterations // 2, 1)
-    before = float(before_frames.mean())
-    k = run.add_joint(REVOLUTE, np.array([0.0, 0.0, 1.0]), means[members].mean(0), members)
-    name = model.names[k]
-    pts = part_points(model, k)
-    hyps = [(REVOLUTE, a, p) for a, p in hinge_lines(model, pts)]
-    hyps += [(PRISMATIC, d, pts.mean(0)) for d in
-             [part_normal(model, k)] + list(np.linalg.svd(pts - pts.mean(0))[2])]
-    # scored where its own Gaussians change (hits' row r: times r and r + 1)
-    key = key_time(run, k, np.concatenate([[0.0], hits[:, members].mean(1)]))
-    scored = []
-    for kind, axis, point in hyps:
-        model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
-        scored.append((score_at(model, frames, cfg, k, key, state_candidates(model, k))[0],
-                       kind, axis, point))
-        run.progress.check_cancel()
-    order = sorted(scored, key=lambda s: s[0])
-    first = order[0][1]
-    second = [s for s in order if s[1] != first][:1]
-    early = None
-    for _, kind, axis, point in order[:1] + second:
-        model.set_type(k, kind, axis, point, np.zeros(len(frames.times)))
-        search_states(model, frames, k, cfg, state_candidates(model, k))
-        run.run_fit(steps, f"new part {name} as {kind}", share,
-                    free=[i == k for i in range(model.k)], coarse=cfg.coarse,
-                    coarse_level=part_level(model, frames, k))
-        with unshaded(model):
-            after_frames = run.evaluate()
-        after = float(after_frames.mean())
-        # a part the optimisation invents has only the loss it lowers as evidence: over
-        # all frames, not on the frames it picks itself (the local test is for proposals)
-        gain = clearly_better(before_frames, after_frames, [])
-        run.progress.log(f"{name}: {int(members.sum())} Gaussians where the frames change and "
-                         f"the model does not; as a {kind} part the image loss is {after:.5f} "
-                         f"(without {before:.5f})")
-        why = implausible(model, k) if gain else None
-        if why:
-            gain = False
-            run.progress.log(f"{name}: not added as a {kind} part, {why}")
-        if gain:
-            return k, after, None
-        if early is None:
-            early = changed_before(model, frames, k, hits, members)
-    run.drop_joint(k)
-    share_early = early.sum() / max(members.sum(), 1)
-    return None, 0.0, early if 0.1 <= share_early <= 0.5 else None
 
 def implausible(model: ArticulatedSplat, k: int, measured: bool = False) -> str | None:
     """Why fitted joint ``k`` is no part to invent, or None: it barely moves

@@ -35,30 +35,6 @@ def seen_static(model: ArticulatedSplat, frames, cfg, k: int, pixels: float = 2.
         moved |= part & front & here
     return ((still >= 2) & ~moved).cpu().numpy()
 
-@torch.no_grad()
-def changed_before(model: ArticulatedSplat, frames, k: int, hits: np.ndarray,
-                   members: np.ndarray, pixels: float = 2.0) -> np.ndarray:
-    """Of ``members`` (bool (N,)), the Gaussians whose first change (their first row of
-    ``hits``, :func:`unexplained`: changed at times r and r + 1) joint ``k`` does not move by
-    ``pixels`` or more on any image at either of those times: another part moved them before
-    this joint moves its part (a realistic cabinet's lower drawer, opened 3 cm just before the
-    upper one, touches it and its onsets run into the upper's; one slide of both explained the
-    frames worse than none). Bool (N,)."""
-    first = hits.argmax(0)
-    changed = torch.as_tensor(members & hits.any(0))
-    rows = torch.as_tensor(first)
-    means = model.splat.means
-    moved = torch.zeros(model.splat.n, dtype=torch.bool, device=means.device)
-    for i, ti in enumerate(frames.time_index):
-        at = changed & ((rows == ti) | (rows == ti - 1))
-        if not at.any():
-            continue
-        v = frames.levels[0][i]
-        (px, py), _, _ = project(v, means)
-        (qx, qy), _, _ = project(v, model.posed(ti)[0])
-        moved |= at & (((qx - px) ** 2 + (qy - py) ** 2).float().sqrt() >= pixels)
-    return (changed & ~moved).cpu().numpy()
-
 def closed_views(model: ArticulatedSplat, frames, cfg):
     """Per frame that has a change map (:func:`.changes.frame_changes`): its time index, view,
     its camera's closed render, the change map, every Gaussian's pixel (column, row) and whether
