@@ -100,6 +100,9 @@ class OptimiseOptions:
     square: bool = option(True, "try each joint along the nearest side of the body's box (its "
                           "up and footprint), kept when it explains the frames no worse than "
                           "the fit (--no-square: the fit's directions)")
+    edges: bool = option(True, "try each hinge's point on the edges of its part's box along "
+                         "its axis, kept when it explains the frames clearly better "
+                         "(--no-edges: the fit's points)")
     depth: bool = option(True, "refine each joint last on the interaction frames' depth, kept "
                          "unless the image loss says it is worse (--no-depth: the rendering "
                          "fit's joints)")

@@ -59,6 +59,7 @@ from .frames import FrameSet, interaction_frames
 from ..robot_twin import tool_path
 from .occluders import known_occluders
 from .square import square_to_body
+from .edge_hinge import edge_hinges
 from .plausible import HIDDEN_SHARE, OpenSpace, into_body, little_motion, open_space
 from .model import ArticulatedSplat, Splat
 from .kinematics import REVOLUTE
@@ -286,6 +287,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         sort_out(hypotheses.remove_spurious(run, locked=model.locked.tolist(), join=True),
                  added, removed, rejected)
     kept_start = hypotheses.keep_better_start(run, *start) if model.k else []
+    edged = edge_hinges(run, fixed(), max(n // 4, 1)) if options.edges and model.k else {}
     depth = refine_on_depth(run, capture, arrays) if options.depth and model.k else {}
     # last: the body's box breaks the ties the image loss leaves, after every step that
     # decides by that loss (a depth refinement after it turned a squared safe door 4.4 deg away)
@@ -295,7 +297,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     for name in run.weak & set(model.names):
         evidence.setdefault(name, {})["weak"] = True
     result = export(model, frames, joints, losses, evidence, cfg, space,
-                    {"square": squared, "depth_fit": depth})
+                    {"edge": edged, "square": squared, "depth_fit": depth})
     if not result:
         raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
                            f"frames and the frames show no part moving that the model does not "
@@ -311,7 +313,8 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
                "merged": merged,
                "trimmed": trimmed, "assigned": assigned,
                "cameras": camera_corrections(model),
-               "kept_start": kept_start, "squared": squared, "added": added,
+               "kept_start": kept_start, "edged": edged, "squared": squared,
+               "added": added,
                "rejected": rejected,
                "depth": depth,
                "types": [j.type for j in result], "processes": run.processes,
