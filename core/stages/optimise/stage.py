@@ -26,7 +26,9 @@ Steps (each fit is :func:`.fit.fit`):
    gone, and moving with each other joint (:func:`.hypotheses.remove_spurious`, ``join``),
    after the last fits: the earlier tests ran before them;
    a joint whose start explains its frames better than the fit keeps the start's axis and point;
-   each joint refined last on the frames' depth (:mod:`.depth_fit`);
+   each hinge tried on its part's edges (:mod:`.edge_hinge`);
+   each joint refined last on the frames' depth (:mod:`.depth_fit`), then along the body's box
+   (:mod:`.square`);
 5. report per joint residual, observed range and confidence.
 """
 
@@ -370,8 +372,9 @@ def export(model: ArticulatedSplat, frames: FrameSet, joints: list[Joint], losse
     fitted (a 10 % lower loss than the other type counts as decisive), halved when the evidence
     is weak (the part displaced by under 5 % of its size, or under 50 Gaussians) or the
     part opens into the body (:func:`.plausible.into_body` in ``space``, the static views).
-    ``reports``: per key, per joint the report of a late step (``square``: :mod:`.square`,
-    ``depth_fit``: :mod:`.depth_fit`), kept in the joint's ``extra[key]``.
+    ``reports``: per key, per joint the report of a late step (``edge``: :mod:`.edge_hinge`,
+    ``square``: :mod:`.square`, ``depth_fit``: :mod:`.depth_fit`), kept in the joint's
+    ``extra[key]``.
     """
     labels = model.labels()
     means = model.splat.means.cpu().numpy()
