@@ -1424,7 +1424,6 @@ def test_a_piece_the_robot_held_joins_the_door_and_gives_it_the_path(cabinet):
     assert model.held_residual(hinge) < 0.005
 
 
-
 @pytest.fixture(scope="module")
 def cabinet_128(tmp_path_factory) -> Path:
     """The cabinet at 128x96: at 64x48 a hinge 26 cm off its door explains the frames of one

@@ -25,10 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from .fit import search_states
 from .hypotheses import (clearly_better, every_camera_lower, hidden_share, hinge_lines,
-                         key_time, moving_frames, off_line, paired_t, part_points, score_all,
-                         state_candidates)
+                         key_time, moving_frames, off_line, paired_t, part_points, refits_alike,
+                         score_all)
 from .kinematics import REVOLUTE
 from .model import farther, restore, snapshot
 from .plausible import HIDDEN_SHARE
@@ -72,19 +71,14 @@ def edge_hinges(run, fixed: list[bool], steps: int) -> dict[str, dict[str, Any]]
         scores = score_all(run, k, key_time(run, k), [(REVOLUTE, axis, p, None) for p in points])
         edge = points[int(np.argmin(scores))]
         fitted = snapshot(model)
-        times = sorted({frames.time_index[i] for i in ids})
         draws = run.rng.bit_generator.state
-        losses, states, paths, inward = [], [], [], []
-        for point in (origin, edge):
-            restore(model, fitted)
-            run.rng.bit_generator.state = draws
-            model.set_type(k, REVOLUTE, axis, point, model.joint_values(k), shading=True)
-            search_states(model, frames, k, run.cfg, state_candidates(model, k))
-            run.run_fit(steps, f"{model.names[k]} on its part's edge", 0.0,
-                        free=[i == k for i in range(model.k)], times=times, hold=("gains",))
-            losses.append(run.evaluate(0))
-            states.append(snapshot(model))
-            paths.append(model.held_residual(k))
+        times = sorted({frames.time_index[i] for i in ids})
+        losses, states, paths = zip(*refits_alike(
+            run, k, [(axis, origin), (axis, edge)], steps, f"{model.names[k]} on its part's edge",
+            search=True, times=times, hold=("gains",)))
+        inward = []
+        for state in states:
+            restore(model, state)
             inward.append(hidden_share(run, k) > HIDDEN_SHARE)
         cameras = np.array([frames.camera[i] for i in ids])
         kept = clearly_better(losses[0], losses[1], ids) and not (inward[1] and not inward[0]) \

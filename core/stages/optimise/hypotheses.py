@@ -555,6 +555,29 @@ def refit(run, k: int, start: tuple, kind: str, restarted: bool, ids: list[int],
     restore(model, kept)
     return fitted
 
+def refits_alike(run, k: int, starts: list[tuple[np.ndarray, np.ndarray]], steps: int,
+                 label: str, subset: list[int] | None = None, search: bool = False,
+                 **fit: Any) -> list[tuple[np.ndarray, tuple, float | None]]:
+    """Joint ``k`` refitted from each start ``(axis, point)`` alike: from the model as it is
+    (its type, states and the part's brightness kept), the same ``steps`` on the same draws of
+    the run's random generator (``fit``: :func:`.fit.fit`'s options), its states first searched
+    again when ``search``. Returns per start (per-frame image losses of the frames ``subset``,
+    all when None; its :func:`snapshot`; :meth:`held_residual`). Leaves the model at its last
+    refit and the generator where that fit left it."""
+    model = run.model
+    fitted = snapshot(model)
+    draws = run.rng.bit_generator.state
+    out = []
+    for axis, point in starts:
+        restore(model, fitted)
+        run.rng.bit_generator.state = draws
+        model.set_type(k, model.types[k], axis, point, model.joint_values(k), shading=True)
+        if search:
+            search_states(model, run.frames, k, run.cfg, state_candidates(model, k))
+        run.run_fit(steps, label, 0.0, free=[i == k for i in range(model.k)], **fit)
+        out.append((run.evaluate(0, subset), snapshot(model), model.held_residual(k)))
+    return out
+
 def fit_draws(run, kind: str, scored: list[tuple], steps: int) -> int:
     """How many times :func:`fit_type` draws from the run's random generator: a draw per fit
     step, of the probes' short fits (when more than one is probed) and of the full fit."""

@@ -29,7 +29,8 @@ import numpy as np
 from ...geometry.rectangle import upright_axes
 from ...geometry.separate import camera_up
 from ...model.capture import Capture
-from .hypotheses import REMOVE_TOL, SIGNIFICANT, moving_frames, paired_t, part_points
+from .hypotheses import (REMOVE_TOL, SIGNIFICANT, moving_frames, paired_t, part_points,
+                         refits_alike)
 from .kinematics import REVOLUTE
 from .model import farther, restore, snapshot
 
@@ -77,21 +78,12 @@ def square_to_body(run, capture: Capture, fixed: list[bool], steps: int
             continue
         fitted = snapshot(model)
         times = sorted({frames.time_index[i] for i in ids})
-        draws = run.rng.bit_generator.state
         centre = part_points(model, k).mean(0)    # the line turns about its point nearest the part
         point = origin + ((centre - origin) @ axis) * axis if model.types[k] == REVOLUTE else origin
-        losses, states, paths = [], [], []
-        for direction in (axis, target):
-            restore(model, fitted)
-            run.rng.bit_generator.state = draws
-            model.set_type(k, model.types[k], direction, point, model.joint_values(k),
-                           shading=True)
-            run.run_fit(steps, f"{model.names[k]} along the body's box", 0.0,
-                        free=[i == k for i in range(model.k)], times=times, lr_scale=0.3,
-                        hold=("axes", "gains"))
-            losses.append(run.evaluate(0, ids))
-            states.append(snapshot(model))
-            paths.append(model.held_residual(k))
+        losses, states, paths = zip(*refits_alike(
+            run, k, [(axis, point), (target, point)], steps,
+            f"{model.names[k]} along the body's box", subset=ids, times=times, lr_scale=0.3,
+            hold=("axes", "gains")))
         t = paired_t(losses[1] - losses[0])
         rise = float(losses[1].mean() / losses[0].mean()) - 1.0
         worse = rise > CLEARLY_WORSE or (rise > REMOVE_TOL and t > SIGNIFICANT) \
