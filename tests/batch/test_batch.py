@@ -28,8 +28,12 @@ from artgs.core.model.ply import read_ply
 from artgs.core.synth.generate import generate_object
 
 ITERATIONS = "15"
-#: Tiny work per stage: few iterations, few export views and hulls, a short check strip.
+#: Tiny work per stage: few iterations, the optimisation's fit alone (its searches over types,
+#: parts, edges, sides and depth, fixed costs that took 76 of a run's 102 s here, are tested with
+#: the stage), few export views and hulls, a short check strip.
 FAST = ("--reconstruct-iterations", ITERATIONS, "--optimise-iterations", ITERATIONS,
+        "--no-optimise-types", "--no-optimise-parts", "--no-optimise-edges",
+        "--no-optimise-square", "--no-optimise-depth",
         "--export-views", "8", "--export-max-hulls", "2", "--export-face-budget", "500",
         "--check-frames", "2")
 OUTPUTS = ("splat.ply", "proposals.json", "articulation.json", "report.json")
