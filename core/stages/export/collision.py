@@ -39,8 +39,9 @@ def convex_parts(mesh: trimesh.Trimesh, threshold: float = 0.05, max_hulls: int 
                            threshold=threshold, max_convex_hull=max_hulls,
                            preprocess_mode="off", mcts_iterations=20, mcts_nodes=8,
                            mcts_max_depth=2, resolution=500, seed=0)
-    hulls = [trimesh.Trimesh(v, f).convex_hull for v, f in parts if len(f) >= 4]
-    hulls = [h for h in hulls if h.volume > 1e-12]
+    with np.errstate(divide="ignore", invalid="ignore"):    # flat pieces: no volume, dropped
+        hulls = [trimesh.Trimesh(v, f).convex_hull for v, f in parts if len(f) >= 4]
+        hulls = [h for h in hulls if h.volume > 1e-12]
     return hulls or [hull]
 
 

@@ -136,6 +136,8 @@ def decimate(part: PartMesh, max_faces: int) -> trimesh.Trimesh:
     factor = np.sqrt(max_faces / len(mesh.faces))
     while factor > 0.1:
         coarse = zoom(part.tsdf, factor, order=1, mode="nearest")
+        if min(coarse.shape) < 2:       # no voxels left across a side to hold a surface
+            break
         voxel = part.voxel * (np.array(part.tsdf.shape) - 1) / (np.array(coarse.shape) - 1)
         # grow the surface by half the coarser voxel (at most one fine voxel) so thin walls stay
         level = min(1.0 / TRUNC_VOXELS, 0.5 * (float(voxel.max()) - part.voxel) / (TRUNC_VOXELS * part.voxel))
