@@ -1023,7 +1023,7 @@ def test_searched_states_follow_the_true_motion(cabinet):
     states) puts every joint within one candidate step of its true state at every time. With
     the door at its searched states (one step short) instead, the drawer's candidates at the
     last time tie within 0.2 % at this test's 32x24 pixels and the winner depends on the CPU's
-    last bits (README, "Ties in the state search")."""
+    last bits (docs/benchmark-log.md, "Ties in the state search")."""
     from artgs.core.geometry.parts import assign_parts
     from artgs.core.stages.optimise.fit import FitConfig, search_states
     from artgs.core.stages.optimise.frames import interaction_frames

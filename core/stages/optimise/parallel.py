@@ -2,15 +2,15 @@
 (:func:`.hypotheses.select_types`), the second half of every other fit step's frames, and half
 of the frames of long evaluations.
 
-The optimisation's work is one thread's Python and torch dispatch on small images: a second
-thread in the kernels buys 13-19 % (README, *Threads*), while two one-thread processes do two
-things at once. The type choice fits each joint as the other type and restarted as its own
-type (probes and a full fit each, about half of a run), each from the same model state, so one
-of the two runs in a helper process (spawned: numba's OpenMP threads do not survive a fork;
-:func:`spawn`) and the other here, each with half the threads. Every other fit renders a
-step's second half of frames (one of two cameras) there while this process renders the first
-(:class:`Halves`, :func:`.fit.halves`); the gradients are summed here. :func:`evaluate` splits
-its frames the same way.
+The optimisation's work is one thread's Python and torch dispatch on small images: a second thread
+in the kernels buys 13-19 % (docs/benchmark-log.md, *Threads*), while two one-thread processes do
+two things at once. The type choice fits each joint as the other type and restarted as its own type
+(probes and a full fit each, about half of a run), each from the same model state, so one of the
+two runs in a helper process (spawned: numba's OpenMP threads do not survive a fork; :func:`spawn`)
+and the other here, each with half the threads. Every other fit renders a step's second half of
+frames (one of two cameras) there while this process renders the first (:class:`Halves`,
+:func:`.fit.halves`); the gradients are summed here. :func:`evaluate` splits its frames the same
+way.
 
 Same result as one process: the helper gets the model's state and the random generator's, this
 process skips the draws the helper's fit makes (:func:`.fit.skip_draws`), one process renders
