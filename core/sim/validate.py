@@ -111,6 +111,31 @@ def collision_check(path: str | Path, joints: list[Joint], sweep: int = 12) -> d
         p.disconnect(client)
 
 
+def problems(result: dict[str, Any]) -> list[str]:
+    """What a failed :func:`validate_urdf` means for the user: one line per failed check, each
+    saying what to do (empty when all passed). A part that sweeps into the body is the usual one:
+    a joint whose axis, point or range is wrong."""
+    lines = []
+    fk, collision, mujoco = result["fk"], result["collision"], result["mujoco"]
+    if not fk["ok"]:
+        why = fk.get("error") or f"off by up to {fk.get('max_error', float('nan')):.3g} m"
+        lines.append(f"its forward kinematics do not reproduce the joints ({why}); please "
+                     f"report this with the output folder")
+    for name, r in collision.get("joints", {}).items():
+        if not r["ok"]:
+            deeper = 100 * (r["max_penetration"] - r["closed_penetration"])
+            lines.append(f"joint '{name}' moves its part {deeper:.1f} cm deeper into the base "
+                         f"over its limits than when closed (allowed {100 * PENETRATION_TOL:g} cm); "
+                         f"fix its axis, point or limits (Bones panel: select the bone, edit "
+                         f"Lower / Upper, Save Joints) or run Optimise Joints again, then Export "
+                         f"URDF again")
+    if "error" in collision:
+        lines.append(f"the collision sweep could not run ({collision['error']})")
+    if not mujoco["ok"]:
+        lines.append(f"MuJoCo does not compile it ({mujoco.get('error', '')})")
+    return lines
+
+
 def mujoco_check(path: str | Path) -> dict[str, Any]:
     """Whether MuJoCo compiles the URDF (bodies, joints, meshes it made)."""
     import mujoco

@@ -17,7 +17,7 @@ from artgs.core.model.joints import Joint
 from artgs.core.model.progress import Progress
 from artgs.core.model.registry import ExportOptions
 from artgs.core.sim.urdf import Box, Geometry, Link, write_urdf
-from artgs.core.sim.validate import collision_check, fk_check, mujoco_check
+from artgs.core.sim.validate import collision_check, fk_check, mujoco_check, problems
 from artgs.core.stages.export.stage import link_frames, run, urdf_joint
 
 from splat_objects import make_out
@@ -122,6 +122,15 @@ def test_collision_check_catches_a_part_swinging_through_the_base(tmp_path):
         path.write_text(write_urdf("c", [body, door], [urdf_joint(joint, frames, ExportOptions())]))
         result = collision_check(path, [joint])
         assert result["ok"] is ok, result
+        said = problems({"fk": fk_check(path, [joint]), "collision": result,
+                         "mujoco": {"ok": True}})
+        if ok:
+            assert said == []
+        else:       # one line, naming the joint, how deep and what to do
+            assert len(said) == 1 and "joint 'door'" in said[0] and "Save Joints" in said[0]
+            deeper = result["joints"]["door"]["max_penetration"] - \
+                result["joints"]["door"]["closed_penetration"]
+            assert f"{100 * deeper:.1f} cm" in said[0]
 
 
 def test_separation_keeps_the_object_and_drops_floor_and_wall():

@@ -84,8 +84,11 @@ def run(out: Path, capture: Capture | None, options: ExportOptions, progress: Pr
     atomic.write_text(out / layout.URDF, text)
 
     progress.update("export", len(names) / (len(names) + 1), "validating the URDF")
-    from ...sim.validate import validate_urdf
+    from ...sim.validate import problems, validate_urdf
     validation = validate_urdf(out / layout.URDF, articulation.joints)
+    for line in problems(validation):
+        progress.log(f"export: {layout.URDF} is written but fails its validation: {line}",
+                     "warning")
     return {
         "joints_file": joints_path.name,
         "links": {m.name: link_figures(m, options.density) for m in meshes},
