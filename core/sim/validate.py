@@ -125,10 +125,10 @@ def problems(result: dict[str, Any]) -> list[str]:
         if not r["ok"]:
             deeper = 100 * (r["max_penetration"] - r["closed_penetration"])
             lines.append(f"joint '{name}' moves its part {deeper:.1f} cm deeper into the base "
-                         f"over its limits than when closed (allowed {100 * PENETRATION_TOL:g} cm); "
-                         f"fix its axis, point or limits (Bones panel: select the bone, edit "
-                         f"Lower / Upper, Save Joints) or run Optimise Joints again, then Export "
-                         f"URDF again")
+                         f"over its limits than when closed "
+                         f"(allowed {100 * PENETRATION_TOL:g} cm); fix its axis, point or limits "
+                         f"(Bones panel: select the bone, edit Lower / Upper, Save Joints) or run "
+                         f"Optimise Joints again, then Export URDF again")
     if "error" in collision:
         lines.append(f"the collision sweep could not run ({collision['error']})")
     if not mujoco["ok"]:
