@@ -244,13 +244,11 @@ def part_level(model: ArticulatedSplat, frames: FrameSet, k: int, min_pixels: in
     return level
 
 
-def score_level(model: ArticulatedSplat, frames: FrameSet, k: int) -> int:
-    """Pyramid level of joint ``k``'s hypothesis scoring and state search: half resolution (the
-    coarsest can be too small to see a part's motion, the finest too sharp to reward a part that
-    is nearly in place), full resolution where its part covers too few pixels at half
-    (:func:`part_level`): a realistic washing machine's door, 10x10 pixels at half resolution,
-    scored best there turned 40 deg where it was turned 72 (64 at full resolution)."""
-    return min(1, len(frames.levels) - 1, part_level(model, frames, k))
+def score_level(frames: FrameSet) -> int:
+    """Pyramid level of hypothesis scoring and state search: half resolution (the coarsest can
+    be too small to see a part's motion, the finest too sharp to reward a part that is nearly
+    in place)."""
+    return min(1, len(frames.levels) - 1)
 
 
 @torch.no_grad()
@@ -261,7 +259,7 @@ def search_states(model: ArticulatedSplat, frames: FrameSet, k: int, cfg: FitCon
     part is lost in the blur and best moved anywhere: a PartNet dishwasher's front 7.7 cm out
     was searched to 58 cm there), then each value the median of itself and its neighbours in
     time (:func:`median3`)."""
-    level = score_level(model, frames, k)
+    level = score_level(frames)
     unit = model.unit_of(model.types[k])
     states = model.states.clone()
     for ti, t in enumerate(frames.times):

@@ -56,7 +56,7 @@ from ...model.registry import OptimiseOptions
 from ...render.device import resolve_device
 from . import parallel
 from .depth_fit import refine_on_depth
-from .fit import FitConfig, fit, part_level, search_states
+from .fit import FitConfig, fit, search_states
 from .frames import FrameSet, interaction_frames
 from ..robot_twin import tool_path
 from .occluders import known_occluders
@@ -242,11 +242,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         if not j.states:
             search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
     trimmed = seen.trim_parts(run, locked=model.locked.tolist()) if options.parts else {}
-    # the coarse phase no coarser than the smallest part still shows (a realistic washing
-    # machine's door, 5x5 pixels at the coarsest level, was fitted there to half its opening)
-    run.run_fit(n, "joints", 0.25, coarse=cfg.coarse,
-                coarse_level=min((part_level(model, frames, k) for k in range(model.k)),
-                                 default=None))
+    run.run_fit(n, "joints", 0.25, coarse=cfg.coarse)
     # the robot's record of what it opened is evidence as a user's joint is: trusted alike
     tooled = missed.add_tool_parts(run, share=0.0) if options.parts else []
     for name in tooled:
