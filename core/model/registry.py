@@ -106,6 +106,9 @@ class OptimiseOptions:
     depth: bool = option(True, "refine each joint last on the interaction frames' depth, kept "
                          "unless the image loss says it is worse (--no-depth: the rendering "
                          "fit's joints)")
+    routes: bool = option(True, "run the optimisation twice, scoring small parts at half and at "
+                          "full resolution, and keep the result that explains the frames better "
+                          "(--no-routes: half resolution only, in half the time)")
     helper: bool = option(True, "share the work with a helper process (the type choice's "
                           "second fit of each joint, half of each fit step's frames), each with "
                           "half of this one's threads, when it has two or more (--no-helper: all "

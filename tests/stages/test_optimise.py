@@ -328,7 +328,10 @@ def test_a_helper_process_and_a_second_run_give_the_same_result(cabinet, tmp_pat
       helper's fit draws other random times than it would here, starts from another state, or
       a step's gradients are summed otherwise);
     - or with the helper killed mid-fit (its work is then done here), in the type choice or in
-      a later fit."""
+      a later fit.
+
+    One route each (``routes=False``): the second route runs the same code with its own helper
+    (test_the_route_that_explains_the_frames_better_is_kept), and doubled this test's time."""
     gt = read_articulation(cabinet / "gt.json")
     start = [_perturb(j, 10.0, 0.05, seed=3) for j in gt.joints]
     start[0].type = "prismatic" if start[0].type == "revolute" else "revolute"
@@ -339,10 +342,11 @@ def test_a_helper_process_and_a_second_run_give_the_same_result(cabinet, tmp_pat
     try:
         for name, helper in (("alone", False), ("helper", True), ("again", True)):
             runs.append(_optimised(tmp_path / name, cabinet, start,
-                                   OptimiseOptions(iterations=40, helper=helper)))
+                                   OptimiseOptions(iterations=40, helper=helper,
+                                                   routes=False)))
             assert runs[-1][2]["processes"] == 1 + helper
-        killed = [_optimised(tmp_path / k.phase, cabinet, start, OptimiseOptions(iterations=40),
-                             k) for k in killers]
+        killed = [_optimised(tmp_path / k.phase, cabinet, start,
+                             OptimiseOptions(iterations=40, routes=False), k) for k in killers]
     finally:
         torch.set_num_threads(threads)
     assert not torch.are_deterministic_algorithms_enabled()
@@ -1053,6 +1057,54 @@ def test_searched_states_follow_the_true_motion(cabinet):
         step = float(grid[1] - grid[0])
         for t in frames.times:
             assert abs(found[t] - true.states[t]) <= step, (true.name, t, found[t], true.states[t])
+
+
+def test_a_small_part_is_scored_at_full_resolution_on_the_fine_route(cabinet):
+    """States are searched and hypotheses scored at half resolution; on the "fine" route
+    (``fine_parts``) at full resolution for a part too small to show its motion there: the door
+    (about 500 pixels) at half, the same door cut to 20 Gaussians at full; the first fit's
+    coarse phase then no coarser than that part shows."""
+    from artgs.core.geometry.parts import assign_parts
+    from artgs.core.stages.optimise.fit import FitConfig, first_coarse_level, score_level
+    from artgs.core.stages.optimise.frames import interaction_frames
+    from artgs.core.stages.optimise.model import ArticulatedSplat, Splat
+    from artgs.core.stages.optimise.stage import object_size
+
+    capture = load_capture(cabinet)
+    gt = read_articulation(cabinet / "gt.json").joints
+    door = next(k for k, j in enumerate(gt) if j.type == "revolute")
+    arrays = initial_splats(capture.static)[0]
+    frames = interaction_frames(capture, torch.device("cpu"))
+    assert len(frames.levels) > 1
+    labels = assign_parts(arrays.means, gt)
+    cut = labels.copy()
+    cut[np.flatnonzero(labels == door + 1)[20:]] = 0
+    half, fine = FitConfig(), FitConfig(fine_parts=True)
+    for parts, level in ((labels, 1), (cut, 0)):
+        model = ArticulatedSplat(Splat.from_arrays(arrays, torch.device("cpu")), gt, frames.times,
+                                 parts, object_size(arrays.means), [False] * len(gt))
+        assert score_level(model, frames, door, half) == 1
+        assert score_level(model, frames, door, fine) == level
+        assert first_coarse_level(model, frames, half) is None
+    assert first_coarse_level(model, frames, fine) == 0
+
+
+def test_the_route_that_explains_the_frames_better_is_kept(cabinet, tmp_path):
+    """The optimisation runs twice ("half" and "fine" routes) and keeps the route with the
+    lower final image loss; ``--no-routes`` runs the "half" route alone, to the same result."""
+    gt = read_articulation(cabinet / "gt.json")
+    start = [_perturb(j, 10.0, 0.05, seed=3) for j in gt.joints]
+    both = _optimised(tmp_path / "both", cabinet, start,
+                      OptimiseOptions(iterations=20, types=False, parts=False))
+    one = _optimised(tmp_path / "one", cabinet, start,
+                     OptimiseOptions(iterations=20, types=False, parts=False, routes=False))
+    routes = both[2]["routes"]
+    assert set(routes) == {"half", "fine"} and set(one[2]["routes"]) == {"half"}
+    assert both[2]["route"] == min(routes, key=routes.get) == both[1].meta["route"]
+    assert both[1].meta["loss"] == pytest.approx(min(routes.values()), abs=1e-6)
+    assert routes["half"] == pytest.approx(one[2]["loss"], abs=1e-6)   # figures: 6 decimals
+    if both[2]["route"] == "half":
+        _assert_same(both, one)
 
 
 def test_key_time_is_never_the_closed_state(cabinet):

@@ -348,10 +348,10 @@ def circle_centre(path: np.ndarray, basis: np.ndarray) -> np.ndarray | None:
 @torch.no_grad()
 def score_at(model: ArticulatedSplat, frames, cfg, k: int, ti: int, values: np.ndarray) -> \
         tuple[float, float]:
-    """Lowest image loss (half resolution) at time index ``ti`` over joint ``k``'s candidate ``values``
+    """Lowest image loss (at :func:`.fit.score_level`) at time index ``ti`` over joint ``k``'s candidate ``values``
     (rad / m), and the value reaching it."""
     from .fit import best_value, frame_loss
-    level = score_level(frames)
+    level = score_level(model, frames, k, cfg)
     ids = frames.at_time(ti)
     unit = model.unit_of(model.types[k])
 
@@ -383,7 +383,8 @@ def key_time(run, k: int, changed: np.ndarray | None = None) -> int:
     model.states = model.states.clone()
     model.states[k] = 0.0
     per_time = np.zeros(len(frames.times))
-    np.add.at(per_time, np.asarray(frames.time_index), run.evaluate(score_level(frames)))
+    np.add.at(per_time, np.asarray(frames.time_index),
+              run.evaluate(score_level(model, frames, k, run.cfg)))
     restore(model, snap)
     per_time[model.moving.cpu().numpy() == 0] = -np.inf
     if changed is not None and np.max(changed) > 0:
@@ -633,7 +634,7 @@ def probe(run, k: int, kind: str, scored: list[tuple], ids: list[int], label: st
         if len(top) > 1:
             run.run_fit(steps, f"{label} (probe)", share / len(top),
                         free=[i == k for i in range(model.k)], coarse=1.0, coarse_level=level)
-        loss = float(run.evaluate(score_level(frames), ids).mean())
+        loss = float(run.evaluate(score_level(model, frames, k, run.cfg), ids).mean())
         key = (hidden_share(run, k) > HIDDEN_SHARE, loss)
         if best is None or key < best[0]:
             best = (key, snapshot(model))

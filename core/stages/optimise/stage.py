@@ -29,7 +29,9 @@ Steps (each fit is :func:`.fit.fit`):
    each hinge tried on its part's edges (:mod:`.edge_hinge`);
    each joint refined last on the frames' depth (:mod:`.depth_fit`), then along the body's box
    (:mod:`.square`);
-5. report per joint residual, observed range and confidence.
+5. steps 1-4 run once per route (:data:`ROUTES`); the route whose final model has the lower
+   image loss is kept;
+6. report per joint residual, observed range and confidence.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ import io
 import math
 import time
 from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -56,7 +59,7 @@ from ...model.registry import OptimiseOptions
 from ...render.device import resolve_device
 from . import parallel
 from .depth_fit import refine_on_depth
-from .fit import FitConfig, fit, search_states
+from .fit import FitConfig, first_coarse_level, fit, search_states
 from .frames import FrameSet, interaction_frames
 from ..robot_twin import tool_path
 from .occluders import known_occluders
@@ -104,6 +107,9 @@ class Runner:
         self.progress, self.options, self.trust = progress, options, trust
         self.rng = np.random.default_rng(options.seed)
         self.phase = ""
+        #: this route's part of the stage's progress (start, width) and its name in messages
+        self.span = (0.0, 1.0)
+        self.route = ""
         self.done = 0.0
         self.share = 0.0
         #: per joint name, the proposal's joint of the other type (hypotheses.alternative_of)
@@ -122,8 +128,10 @@ class Runner:
 
         def tick(step: int, loss: float) -> None:
             if step % 10 == 0 or step == steps - 1:
-                self.progress.update(STAGE, self.done + share * (step + 1) / steps,
-                                     f"{phase}: step {step + 1}/{steps}", loss=loss,
+                start, width = self.span
+                route = f"route {self.route}, " if self.route else ""
+                self.progress.update(STAGE, start + width * (self.done + share * (step + 1) / steps),
+                                     f"{route}{phase}: step {step + 1}/{steps}", loss=loss,
                                      **self.joint_figures())
             else:
                 self.progress.check_cancel()
@@ -184,15 +192,39 @@ def optimise(out: str | Path, capture: Capture, progress: Progress,
              config: FitConfig | None = None) -> dict[str, Any]:
     """Optimise the proposals of ``out`` against ``capture``; writes the outputs (module doc).
     The same inputs and seed give the same outputs (:func:`deterministic`)."""
-    with deterministic(), ExitStack() as closing:
-        return _optimise(out, capture, progress, options, config, closing)
+    with deterministic():
+        return _optimise(out, capture, progress, options, config)
+
+
+#: The optimisation's routes: (name, changes to the FitConfig). Each runs the whole
+#: optimisation from the proposals; the route whose final model explains the interaction frames
+#: best (image loss, full resolution, every frame) is kept. "half" scores hypotheses and searches
+#: states at half resolution; "fine" does so at full resolution for parts under 64 pixels at
+#: half, and runs the first fit's coarse phase no coarser than the smallest part shows (a
+#: realistic washing machine's door, 5x5 pixels at the coarsest level, was fitted there to
+#: 60-70 % of its opening). Neither route is better on every capture; their final losses pick
+#: the better on most (docs/benchmark-log.md, "Two routes").
+ROUTES: tuple[tuple[str, dict[str, Any]], ...] = (("half", {}), ("fine", {"fine_parts": True}))
+
+
+@dataclass
+class Route:
+    """One route's finished optimisation: the runner (model, frames), the final loss of every
+    frame and what its steps report."""
+
+    name: str
+    run: Runner
+    losses: np.ndarray
+    evidence: dict[str, dict[str, Any]]
+    figures: dict[str, Any]
+
+    @property
+    def loss(self) -> float:
+        return float(self.losses.mean())
 
 
 def _optimise(out: Path | str, capture: Capture, progress: Progress,
-              options: OptimiseOptions | None, config: FitConfig | None,
-              closing: ExitStack) -> dict[str, Any]:
-    from . import assign, hypotheses, missed, seen
-
+              options: OptimiseOptions | None, config: FitConfig | None) -> dict[str, Any]:
     options = options or OptimiseOptions()
     cfg = config or FitConfig()
     out = Path(out)
@@ -205,7 +237,6 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
                          field="joints")
     t0 = time.perf_counter()
     dev = resolve_device(options.device)
-    torch.manual_seed(options.seed)
     size = object_size(arrays.means)
     space = open_space(capture.static, size)
     frames = interaction_frames(capture, dev, occluders=known_occluders(capture, dev,
@@ -213,10 +244,65 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
                                 mask_pixels=cfg.mask_pixels)
     if options.robot_twin:
         frames.tool = tool_path(capture)
-    splat = Splat.from_arrays(arrays, dev)
     joints = list(proposals.joints)
+    progress.log(f"optimise: {len(joints)} joint(s), {len(arrays.means)} Gaussians, "
+                 f"{len(frames.time_index)} frames at {len(frames.times)} times, "
+                 f"size {size:.3f} m")
+    routes = ROUTES if options.routes else ROUTES[:1]
+    done: list[Route] = []
+    for i, (name, changes) in enumerate(routes):
+        with ExitStack() as helper:
+            done.append(_route(name, replace(cfg, **changes), arrays, joints, frames, space,
+                               capture, progress, options, helper, dev,
+                               (i / len(routes), 1 / len(routes))))
+        if len(routes) > 1:
+            progress.log(f"route {name}: {done[-1].run.model.k} joint(s), final loss "
+                         f"{done[-1].loss:.5f}")
+    best = min(done, key=lambda r: r.loss)
+    model, run, losses = best.run.model, best.run, best.losses
+    result = export(model, frames, joints, losses, best.evidence, run.cfg, space,
+                    {key: best.figures[key] for key in ("edge", "square", "depth_fit")})
+    if not result:
+        raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
+                           f"frames and the frames show no part moving that the model does not "
+                           f"explain; {layout.ARTICULATION} is left as it was. Check that the "
+                           f"interaction frames show a part moving, or add one by hand "
+                           f"(Bones panel: Add Joint, Save Joints) and optimise again")
+    f = best.figures
+    meta = {k: v for k, v in proposals.meta.items() if k != "optimised"}
+    articulation = Articulation(result, {**meta, "optimised": True,
+                                         "loss": best.loss, "route": best.name,
+                                         "removed": f["removed"], "merged": f["merged"],
+                                         "added": f["added"], "rejected": f["rejected"]})
+    figures = {"joints": len(result), "loss": best.loss,
+               "route": best.name, "routes": {r.name: round(r.loss, 6) for r in done},
+               "removed": f["removed"], "merged": f["merged"],
+               "trimmed": f["trimmed"], "assigned": f["assigned"],
+               "cameras": camera_corrections(model),
+               "kept_start": f["kept_start"], "edged": f["edge"], "squared": f["square"],
+               "added": f["added"],
+               "rejected": f["rejected"],
+               "depth": f["depth_fit"],
+               "types": [j.type for j in result], "processes": run.processes,
+               "seconds": round(time.perf_counter() - t0, 2)}
+    write_labels(out / layout.PART_LABELS, model.labels())
+    write_articulation(out / layout.ARTICULATION, articulation)
+    return figures
+
+
+def _route(name: str, cfg: FitConfig, arrays: Any, joints: list[Joint], frames: FrameSet,
+           space: OpenSpace | None, capture: Capture, progress: Progress,
+           options: OptimiseOptions, closing: ExitStack, dev: torch.device,
+           span: tuple[float, float]) -> Route:
+    """One route of the optimisation (:data:`ROUTES`): steps 1-4 of the module doc from the
+    proposals ``joints``, with ``cfg``; its progress reported in ``span`` (start, width) of the
+    stage."""
+    from . import assign, hypotheses, missed, seen
+
+    torch.manual_seed(options.seed)
+    splat = Splat.from_arrays(arrays, dev)
     labels = assign_parts(arrays.means, joints)
-    model = ArticulatedSplat(splat, joints, frames.times, labels, size,
+    model = ArticulatedSplat(splat, joints, frames.times, labels, object_size(arrays.means),
                              [is_locked(j) for j in joints])
     trust = torch.tensor([USER_TRUST if j.source == "user" else 0.0 for j in joints],
                          dtype=torch.float32, device=dev)
@@ -225,14 +311,13 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         model.use_cameras(frames.camera)
     run = Runner(model, frames, cfg, progress, options, trust)
     run.space = space
+    run.span = span
+    run.route = name if span[1] < 1 else ""
     run.alternatives = {j.name: hypotheses.alternative_of(j, frames.times) for j in joints}
     if options.types and joints:
         parallel.start(run)
         closing.callback(parallel.stop, run)
     n = options.iterations
-    progress.log(f"optimise: {len(joints)} joint(s), {splat.n} Gaussians, "
-                 f"{len(frames.time_index)} frames at {len(frames.times)} times, "
-                 f"size {size:.3f} m")
 
     model.hard = torch.as_tensor(labels, device=dev)       # the boxes' parts, until step 4
     user = {j.name for j in joints if j.source == "user"}
@@ -242,7 +327,8 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
         if not j.states:
             search_states(model, frames, k, cfg, hypotheses.state_candidates(model, k))
     trimmed = seen.trim_parts(run, locked=model.locked.tolist()) if options.parts else {}
-    run.run_fit(n, "joints", 0.25, coarse=cfg.coarse)
+    run.run_fit(n, "joints", 0.25, coarse=cfg.coarse,
+                coarse_level=first_coarse_level(model, frames, cfg))
     # the robot's record of what it opened is evidence as a user's joint is: trusted alike
     tooled = missed.add_tool_parts(run, share=0.0) if options.parts else []
     for name in tooled:
@@ -298,32 +384,10 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     losses = run.evaluate()
     for name in run.weak & set(model.names):
         evidence.setdefault(name, {})["weak"] = True
-    result = export(model, frames, joints, losses, evidence, cfg, space,
-                    {"edge": edged, "square": squared, "depth_fit": depth})
-    if not result:
-        raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
-                           f"frames and the frames show no part moving that the model does not "
-                           f"explain; {layout.ARTICULATION} is left as it was. Check that the "
-                           f"interaction frames show a part moving, or add one by hand "
-                           f"(Bones panel: Add Joint, Save Joints) and optimise again")
-    meta = {k: v for k, v in proposals.meta.items() if k != "optimised"}
-    articulation = Articulation(result, {**meta, "optimised": True,
-                                         "loss": float(losses.mean()), "removed": removed,
-                                         "merged": merged, "added": added,
-                                         "rejected": rejected})
-    figures = {"joints": len(result), "loss": float(losses.mean()), "removed": removed,
-               "merged": merged,
-               "trimmed": trimmed, "assigned": assigned,
-               "cameras": camera_corrections(model),
-               "kept_start": kept_start, "edged": edged, "squared": squared,
-               "added": added,
-               "rejected": rejected,
-               "depth": depth,
-               "types": [j.type for j in result], "processes": run.processes,
-               "seconds": round(time.perf_counter() - t0, 2)}
-    write_labels(out / layout.PART_LABELS, model.labels())
-    write_articulation(out / layout.ARTICULATION, articulation)
-    return figures
+    return Route(name, run, losses, evidence,
+                 {"edge": edged, "square": squared, "depth_fit": depth, "removed": removed,
+                  "merged": merged, "added": added, "rejected": rejected, "trimmed": trimmed,
+                  "assigned": assigned, "kept_start": kept_start})
 
 
 def sort_out(dropped: list[str], added: list[str], removed: list[str],
