@@ -348,8 +348,8 @@ def circle_centre(path: np.ndarray, basis: np.ndarray) -> np.ndarray | None:
 @torch.no_grad()
 def score_at(model: ArticulatedSplat, frames, cfg, k: int, ti: int, values: np.ndarray) -> \
         tuple[float, float]:
-    """Lowest image loss (at :func:`.fit.score_level`) at time index ``ti`` over joint ``k``'s candidate ``values``
-    (rad / m), and the value reaching it."""
+    """Lowest image loss (at :func:`.fit.score_level`) at time index ``ti`` over joint ``k``'s
+    candidate ``values`` (rad / m), and the value reaching it."""
     from .fit import best_value, frame_loss
     level = score_level(model, frames, k, cfg)
     ids = frames.at_time(ti)

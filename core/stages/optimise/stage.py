@@ -130,9 +130,9 @@ class Runner:
             if step % 10 == 0 or step == steps - 1:
                 start, width = self.span
                 route = f"route {self.route}, " if self.route else ""
-                self.progress.update(STAGE, start + width * (self.done + share * (step + 1) / steps),
-                                     f"{route}{phase}: step {step + 1}/{steps}", loss=loss,
-                                     **self.joint_figures())
+                fraction = start + width * (self.done + share * (step + 1) / steps)
+                self.progress.update(STAGE, fraction, f"{route}{phase}: step {step + 1}/{steps}",
+                                     loss=loss, **self.joint_figures())
             else:
                 self.progress.check_cancel()
 
