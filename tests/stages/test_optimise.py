@@ -27,6 +27,9 @@ from artgs.core.stages.reconstruct import initial_splats
 from artgs.core.synth.generate import generate_object
 
 SIZE = {"width": 64, "height": 48, "static_views": 8, "steps": 3}
+# The slowest tests of one step run one route (``routes=False``): the step is the same code on
+# both routes, the second doubled their time, and the choice between routes has its own test
+# (test_the_route_that_explains_the_frames_better_is_kept).
 
 
 def _perturb(joint, degrees: float, metres: float, seed: int):
@@ -432,7 +435,7 @@ def test_type_chosen_by_evidence(cabinet, tmp_path):
     door.states = {t: 0.3 * np.sin(v) for t, v in door.states.items()}
     out = _out(tmp_path, cabinet, start)
     figures = optimise(out, load_capture(cabinet), QUIET,
-                       OptimiseOptions(iterations=120, types=True, parts=False))
+                       OptimiseOptions(iterations=120, types=True, parts=False, routes=False))
     art = read_articulation(out / layout.ARTICULATION)
     scores = match_joints(art.joints, gt.joints)
     assert all(s.type_correct for s in scores), (scores, figures)
@@ -459,7 +462,7 @@ def test_hinge_across_the_door_restarts(cabinet, tmp_path):
     door.axis, door.origin = across / np.linalg.norm(across), centre
     out = _out(tmp_path, cabinet, start)
     figures = optimise(out, load_capture(cabinet), QUIET,
-                       OptimiseOptions(iterations=120, types=True, parts=False))
+                       OptimiseOptions(iterations=120, types=True, parts=False, routes=False))
     art = read_articulation(out / layout.ARTICULATION)
     hinge = next(j for j in art.joints if j.type == "revolute")
     s = match_joints([hinge], [truth])[0]
@@ -487,7 +490,7 @@ def test_spurious_part_removed(cabinet, tmp_path):
     gt = read_articulation(cabinet / "gt.json")
     out = _out(tmp_path, cabinet, list(gt.joints) + [_ghost(cabinet)])
     figures = optimise(out, load_capture(cabinet), QUIET,
-                       OptimiseOptions(iterations=60, types=False, parts=True))
+                       OptimiseOptions(iterations=60, types=False, parts=True, routes=False))
     names = [j.name for j in read_articulation(out / layout.ARTICULATION).joints]
     assert "ghost" in figures["removed"] and "ghost" not in names, figures
     assert set(names) == {j.name for j in gt.joints}
@@ -526,7 +529,8 @@ def test_a_part_that_only_moves_out_of_the_way_is_removed(cabinet, tmp_path):
     out = _out(tmp_path, cabinet, list(gt.joints) + [fake])
     write_ply(out / layout.SPLAT, arrays)
     figures = optimise(out, load_capture(cabinet), QUIET,
-                       OptimiseOptions(iterations=60, types=False, parts=True, assign=False))
+                       OptimiseOptions(iterations=60, types=False, parts=True, assign=False,
+                                       routes=False))
     names = [j.name for j in read_articulation(out / layout.ARTICULATION).joints]
     assert "floaters" in figures["removed"] and "floaters" not in names, figures
     assert set(names) == {j.name for j in gt.joints}, figures
