@@ -253,7 +253,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     for i, (name, changes) in enumerate(routes):
         with ExitStack() as helper:
             done.append(_route(name, replace(cfg, **changes), arrays, joints, frames, space,
-                               capture, progress, options, helper, dev,
+                               capture, progress, options, helper, dev, size,
                                (i / len(routes), 1 / len(routes))))
         if len(routes) > 1:
             progress.log(f"route {name}: {done[-1].run.model.k} joint(s), final loss "
@@ -292,7 +292,7 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
 
 def _route(name: str, cfg: FitConfig, arrays: Any, joints: list[Joint], frames: FrameSet,
            space: OpenSpace | None, capture: Capture, progress: Progress,
-           options: OptimiseOptions, closing: ExitStack, dev: torch.device,
+           options: OptimiseOptions, closing: ExitStack, dev: torch.device, size: float,
            span: tuple[float, float]) -> Route:
     """One route of the optimisation (:data:`ROUTES`): steps 1-4 of the module doc from the
     proposals ``joints``, with ``cfg``; its progress reported in ``span`` (start, width) of the
@@ -302,7 +302,7 @@ def _route(name: str, cfg: FitConfig, arrays: Any, joints: list[Joint], frames: 
     torch.manual_seed(options.seed)
     splat = Splat.from_arrays(arrays, dev)
     labels = assign_parts(arrays.means, joints)
-    model = ArticulatedSplat(splat, joints, frames.times, labels, object_size(arrays.means),
+    model = ArticulatedSplat(splat, joints, frames.times, labels, size,
                              [is_locked(j) for j in joints])
     trust = torch.tensor([USER_TRUST if j.source == "user" else 0.0 for j in joints],
                          dtype=torch.float32, device=dev)
