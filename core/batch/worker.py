@@ -51,8 +51,9 @@ def limit_threads(threads: int) -> None:
     import numba
     import torch
 
-    torch.set_num_threads(threads)
+    # numba first: its first call resets the OpenMP threads torch shares (optimise/parallel.py)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    torch.set_num_threads(threads)
 
 
 @contextmanager

@@ -109,10 +109,11 @@ class OptimiseOptions:
     routes: bool = option(True, "run the optimisation twice, scoring small parts at half and at "
                           "full resolution, and keep the result that explains the frames better "
                           "(--no-routes: half resolution only, in half the time)")
-    helper: bool = option(True, "share the work with a helper process (the type choice's "
-                          "second fit of each joint, half of each fit step's frames), each with "
-                          "half of this one's threads, when it has two or more (--no-helper: all "
-                          "in this one; the result is the same)")
+    helper: bool = option(True, "share the work with a second process when this one has two "
+                          "or more threads: the second route (--routes) runs in it beside the "
+                          "first, or with one route, a helper takes the type choice's second fit "
+                          "of each joint and half of each fit step's frames (--no-helper: all in "
+                          "this one; the result is the same)")
     device: str = _device()
     max_side: int = _max_side()
     robot_twin: bool = _robot_twin()

@@ -1095,18 +1095,33 @@ def test_a_small_part_is_scored_at_full_resolution_on_the_fine_route(cabinet):
 
 def test_the_route_that_explains_the_frames_better_is_kept(cabinet, tmp_path):
     """The optimisation runs twice ("half" and "fine" routes) and keeps the route with the
-    lower final image loss; ``--no-routes`` runs the "half" route alone, to the same result."""
+    lower final image loss; ``--no-routes`` runs the "half" route alone, to the same result.
+    With two threads the routes run side by side (the second in a process of its own) to the
+    same result as one after the other (``helper=False``), and when that process dies its
+    route runs here instead, again to the same result."""
     gt = read_articulation(cabinet / "gt.json")
     start = [_perturb(j, 10.0, 0.05, seed=3) for j in gt.joints]
-    both = _optimised(tmp_path / "both", cabinet, start,
-                      OptimiseOptions(iterations=20, types=False, parts=False))
-    one = _optimised(tmp_path / "one", cabinet, start,
-                     OptimiseOptions(iterations=20, types=False, parts=False, routes=False))
+    opts = OptimiseOptions(iterations=20, types=False, parts=False)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    killer = _KillHelper("route fine, joints")
+    try:
+        both = _optimised(tmp_path / "both", cabinet, start, opts)
+        apart = _optimised(tmp_path / "apart", cabinet, start, replace(opts, helper=False))
+        killed = _optimised(tmp_path / "killed", cabinet, start, opts, killer)
+    finally:
+        torch.set_num_threads(threads)
+    one = _optimised(tmp_path / "one", cabinet, start, replace(opts, routes=False))
     routes = both[2]["routes"]
     assert set(routes) == {"half", "fine"} and set(one[2]["routes"]) == {"half"}
     assert both[2]["route"] == min(routes, key=routes.get) == both[1].meta["route"]
     assert both[1].meta["loss"] == pytest.approx(min(routes.values()), abs=1e-6)
     assert routes["half"] == pytest.approx(one[2]["loss"], abs=1e-6)   # figures: 6 decimals
+    assert both[2]["processes"] == 2 and apart[2]["processes"] == 1
+    assert killer.killed == 1
+    for other in (apart, killed):
+        assert other[2]["routes"] == routes
+        _assert_same(both, other)
     if both[2]["route"] == "half":
         _assert_same(both, one)
 

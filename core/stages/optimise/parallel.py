@@ -50,8 +50,7 @@ def _serve(conn: Connection, threads: int) -> None:
     answered with ``(True, result)`` or ``(False, error)``, in order, until the pipe closes.
     Plain pickles both ways (tensors by value, not in shared memory)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)      # the parent cancels and ends the helper
-    torch.set_num_threads(threads)
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    set_threads(threads)
     torch.use_deterministic_algorithms(True, warn_only=True)
     while True:
         try:
@@ -328,10 +327,12 @@ def main_hidden() -> Iterator[None]:
 
 
 def set_threads(n: int) -> None:
-    """torch and numba with ``n`` threads (at least one)."""
+    """torch and numba with ``n`` threads (at least one). numba first: its first call starts
+    its OpenMP threads, which sets the OpenMP thread count that torch shares back to all the
+    cores (seen: a spawned helper asked for one thread ran torch with two)."""
+    numba.set_num_threads(max(min(n, numba.config.NUMBA_NUM_THREADS), 1))
     if torch.get_num_threads() != max(n, 1):
         torch.set_num_threads(max(n, 1))
-    numba.set_num_threads(max(min(n, numba.config.NUMBA_NUM_THREADS), 1))
 
 
 @contextmanager
@@ -342,8 +343,8 @@ def threads(n: int) -> Iterator[None]:
     try:
         yield
     finally:
-        torch.set_num_threads(before[0])
         numba.set_num_threads(before[1])
+        torch.set_num_threads(before[0])
 
 
 def start(run) -> None:

@@ -29,8 +29,8 @@ Steps (each fit is :func:`.fit.fit`):
    each hinge tried on its part's edges (:mod:`.edge_hinge`);
    each joint refined last on the frames' depth (:mod:`.depth_fit`), then along the body's box
    (:mod:`.square`);
-5. steps 1-4 run once per route (:data:`ROUTES`); the route whose final model has the lower
-   image loss is kept;
+5. steps 1-4 run once per route (:data:`ROUTES`), side by side where the threads allow
+   (:mod:`.routes`); the route whose final model has the lower image loss is kept;
 6. report per joint residual, observed range and confidence.
 """
 
@@ -41,6 +41,7 @@ import math
 import time
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -65,6 +66,7 @@ from ..robot_twin import tool_path
 from .occluders import known_occluders
 from .square import square_to_body
 from .edge_hinge import edge_hinges
+from .routes import run_routes
 from .plausible import HIDDEN_SHARE, OpenSpace, into_body, little_motion, open_space
 from .model import ArticulatedSplat, Splat
 from .kinematics import REVOLUTE
@@ -209,14 +211,16 @@ ROUTES: tuple[tuple[str, dict[str, Any]], ...] = (("half", {}), ("fine", {"fine_
 
 @dataclass
 class Route:
-    """One route's finished optimisation: the runner (model, frames), the final loss of every
-    frame and what its steps report."""
+    """One route's finished optimisation: its model and config, the final loss of every frame,
+    what its steps report, and how many processes it used (2 with a helper)."""
 
     name: str
-    run: Runner
+    model: ArticulatedSplat
+    cfg: FitConfig
     losses: np.ndarray
     evidence: dict[str, dict[str, Any]]
     figures: dict[str, Any]
+    processes: int
 
     @property
     def loss(self) -> float:
@@ -248,19 +252,18 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
     progress.log(f"optimise: {len(joints)} joint(s), {len(arrays.means)} Gaussians, "
                  f"{len(frames.time_index)} frames at {len(frames.times)} times, "
                  f"size {size:.3f} m")
-    routes = ROUTES if options.routes else ROUTES[:1]
-    done: list[Route] = []
-    for i, (name, changes) in enumerate(routes):
-        with ExitStack() as helper:
-            done.append(_route(name, replace(cfg, **changes), arrays, joints, frames, space,
-                               capture, progress, options, helper, dev, size,
-                               (i / len(routes), 1 / len(routes))))
-        if len(routes) > 1:
-            progress.log(f"route {name}: {done[-1].run.model.k} joint(s), final loss "
-                         f"{done[-1].loss:.5f}")
+    routes = [(name, replace(cfg, **changes))
+              for name, changes in (ROUTES if options.routes else ROUTES[:1])]
+    work = partial(_route, arrays=arrays, joints=joints, frames=frames, space=space,
+                   capture=capture, options=options, dev=dev, size=size)
+    done, at_once = run_routes(work, routes, progress,
+                               concurrent=options.helper and dev.type == "cpu")
+    if len(routes) > 1:
+        for r in done:
+            progress.log(f"route {r.name}: {r.model.k} joint(s), final loss {r.loss:.5f}")
     best = min(done, key=lambda r: r.loss)
-    model, run, losses = best.run.model, best.run, best.losses
-    result = export(model, frames, joints, losses, best.evidence, run.cfg, space,
+    model, losses = best.model, best.losses
+    result = export(model, frames, joints, losses, best.evidence, best.cfg, space,
                     {key: best.figures[key] for key in ("edge", "square", "depth_fit")})
     if not result:
         raise NothingFound(f"no moving part found: no proposed joint explains the interaction "
@@ -283,20 +286,22 @@ def _optimise(out: Path | str, capture: Capture, progress: Progress,
                "added": f["added"],
                "rejected": f["rejected"],
                "depth": f["depth_fit"],
-               "types": [j.type for j in result], "processes": run.processes,
+               "types": [j.type for j in result],
+               "processes": at_once if at_once > 1 else best.processes,
                "seconds": round(time.perf_counter() - t0, 2)}
     write_labels(out / layout.PART_LABELS, model.labels())
     write_articulation(out / layout.ARTICULATION, articulation)
     return figures
 
 
-def _route(name: str, cfg: FitConfig, arrays: Any, joints: list[Joint], frames: FrameSet,
-           space: OpenSpace | None, capture: Capture, progress: Progress,
-           options: OptimiseOptions, closing: ExitStack, dev: torch.device, size: float,
-           span: tuple[float, float]) -> Route:
+def _route(name: str, cfg: FitConfig, progress: Progress, closing: ExitStack,
+           span: tuple[float, float], label: str, *, arrays: Any, joints: list[Joint],
+           frames: FrameSet, space: OpenSpace | None, capture: Capture,
+           options: OptimiseOptions, dev: torch.device, size: float) -> Route:
     """One route of the optimisation (:data:`ROUTES`): steps 1-4 of the module doc from the
     proposals ``joints``, with ``cfg``; its progress reported in ``span`` (start, width) of the
-    stage."""
+    stage, its messages named by ``label`` (none: empty); its helper ended by ``closing``
+    (:func:`.routes.run_routes` runs it here or in a process of its own)."""
     from . import assign, hypotheses, missed, seen
 
     torch.manual_seed(options.seed)
@@ -312,7 +317,7 @@ def _route(name: str, cfg: FitConfig, arrays: Any, joints: list[Joint], frames: 
     run = Runner(model, frames, cfg, progress, options, trust)
     run.space = space
     run.span = span
-    run.route = name if span[1] < 1 else ""
+    run.route = label
     run.alternatives = {j.name: hypotheses.alternative_of(j, frames.times) for j in joints}
     if options.types and joints:
         parallel.start(run)
@@ -382,12 +387,12 @@ def _route(name: str, cfg: FitConfig, arrays: Any, joints: list[Joint], frames: 
     squared = square_to_body(run, capture, fixed(), max(n // 6, 1)) \
         if options.square and model.k else {}
     losses = run.evaluate()
-    for name in run.weak & set(model.names):
-        evidence.setdefault(name, {})["weak"] = True
-    return Route(name, run, losses, evidence,
+    for weak in run.weak & set(model.names):
+        evidence.setdefault(weak, {})["weak"] = True
+    return Route(name, model, cfg, losses, evidence,
                  {"edge": edged, "square": squared, "depth_fit": depth, "removed": removed,
                   "merged": merged, "added": added, "rejected": rejected, "trimmed": trimmed,
-                  "assigned": assigned, "kept_start": kept_start})
+                  "assigned": assigned, "kept_start": kept_start}, run.processes)
 
 
 def sort_out(dropped: list[str], added: list[str], removed: list[str],
