@@ -108,7 +108,7 @@ class OptimiseOptions:
                          "fit's joints)")
     routes: bool = option(True, "run the optimisation twice, scoring small parts at half and at "
                           "full resolution, and keep the result that explains the frames better "
-                          "(--no-routes: half resolution only, in half the time)")
+                          "(--no-routes: half resolution only, in about two thirds of the time)")
     helper: bool = option(True, "share the work with a second process when this one has two "
                           "or more threads: the second route (--routes) runs in it beside the "
                           "first, or with one route, a helper takes the type choice's second fit "
