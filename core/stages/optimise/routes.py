@@ -23,6 +23,7 @@ import signal
 import threading
 from contextlib import ExitStack
 from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
 from typing import Any, Callable
 
 import torch
@@ -120,15 +121,21 @@ class RouteProcess:
         self.name, self.cfg, self.progress = name, cfg, progress
         ctx = multiprocessing.get_context("spawn")
         self.conn, theirs = ctx.Pipe()
-        payload = pickle.dumps((work, name, cfg, (0.0, 1.0)))
-        # not a daemon, so that a route with two or more threads can have a helper
-        self.proc = ctx.Process(target=_serve, args=(theirs, threads, payload), daemon=False,
-                                name=f"artgs-route-{name}")
-        with main_hidden():
-            self.proc.start()
-        theirs.close()
         self.outcome: tuple[str, Any] = ("failed", "the route process ended")
         self.reader = threading.Thread(target=self._read, daemon=True)
+        self.proc: BaseProcess = ctx.Process()    # until started
+        try:
+            payload = pickle.dumps((work, name, cfg, (0.0, 1.0)))
+            # not a daemon, so that a route with two or more threads can have a helper
+            self.proc = ctx.Process(target=_serve, args=(theirs, threads, payload),
+                                    daemon=False, name=f"artgs-route-{name}")
+            with main_hidden():
+                self.proc.start()
+        except Exception as exc:   # noqa: BLE001 - any failure: the route runs here
+            self.outcome = ("failed", f"the route process did not start: {exc}")
+            return
+        finally:
+            theirs.close()
         self.reader.start()
 
     def _read(self) -> None:
@@ -160,6 +167,9 @@ class RouteProcess:
 
     def close(self) -> None:
         """End the process (done or not)."""
+        if self.proc.pid is None:      # never started
+            self.conn.close()
+            return
         self.proc.terminate()
         self.proc.join(5)
         if self.proc.is_alive():
