@@ -46,16 +46,6 @@ def limit_threads_env(threads: int) -> None:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
-def limit_threads(threads: int) -> None:
-    """Limit torch's and numba's threads in this (already running) process."""
-    import numba
-    import torch
-
-    # numba first: its first call resets the OpenMP threads torch shares (optimise/parallel.py)
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    torch.set_num_threads(threads)
-
-
 @contextmanager
 def redirected(log: Path) -> Iterator[TextIO]:
     """Send this process's stdout and stderr (also C-level writes) to ``log`` (appended)."""
@@ -92,6 +82,7 @@ def run_job(job: Job, stage_options: dict[str, Any], threads: int) -> Outcome:
     ``stage_options``: per stage name, its options dataclass (as :func:`core.pipeline.run`).
     """
     from .. import pipeline
+    from ..render.threads import set_threads
 
     attempt = _attempt_number(job.log) + 1
     start = time.perf_counter()
@@ -102,7 +93,7 @@ def run_job(job: Job, stage_options: dict[str, Any], threads: int) -> Outcome:
                      f"{threads} thread(s), {time.strftime('%Y-%m-%dT%H:%M:%S%z')} ===\n")
         stream.write(f"capture {job.capture}\nout {job.out}\n")
         try:
-            limit_threads(threads)
+            set_threads(threads)      # torch's and numba's, in this running process
             progress = Progress("text", stream=stream, min_interval=5.0)
             pipeline.run(job.capture, job.out, progress, stage_options, resume=job.resume)
         except (KeyboardInterrupt, Cancelled):

@@ -24,6 +24,7 @@ from ..render.cpu.jit import kernel
 from ..render.cpu.project import project
 from ..render.rasterize import rasterize
 from ..render.sh import rgb_to_sh0
+from ..render.threads import set_threads
 from .options import BenchRenderOptions
 
 THREADS = 2
@@ -135,9 +136,7 @@ def bench_one(size: int, n: int, backend: str, runs: int, grad: bool, low_pass: 
 
 def bench_render(args: BenchRenderOptions, progress) -> int:
     """Print forward / forward+backward timings of the CPU kernels and the reference."""
-    # numba first: its first call resets the OpenMP threads torch shares (optimise/parallel.py)
-    numba.set_num_threads(min(THREADS, numba.config.NUMBA_NUM_THREADS))
-    torch.set_num_threads(THREADS)
+    set_threads(THREADS)
     say = print if progress.mode == "text" else (lambda *a, **k: None)
     say(f"bench-render: shell scene, SH degree 0, low-pass {args.low_pass} px^2, threads torch={torch.get_num_threads()} "
         f"numba={numba.get_num_threads()}, median of {args.runs} runs after 2 warm-up runs; "

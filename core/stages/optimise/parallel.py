@@ -31,11 +31,11 @@ from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import Any, Callable, Iterator
 
-import numba
 import numpy as np
 import torch
 
 from ...model.progress import Progress
+from ...render.threads import set_threads, threads
 from .fit import evaluate as evaluate_here, half_grads, here
 
 _RUN: Any = None      # the helper's copy of the Runner (set by _load)
@@ -324,27 +324,6 @@ def main_hidden() -> Iterator[None]:
     finally:
         for k, v in saved.items():
             setattr(main, k, v)
-
-
-def set_threads(n: int) -> None:
-    """torch and numba with ``n`` threads (at least one). numba first: its first call starts
-    its OpenMP threads, which sets the OpenMP thread count that torch shares back to all the
-    cores (seen: a spawned helper asked for one thread ran torch with two)."""
-    numba.set_num_threads(max(min(n, numba.config.NUMBA_NUM_THREADS), 1))
-    if torch.get_num_threads() != max(n, 1):
-        torch.set_num_threads(max(n, 1))
-
-
-@contextmanager
-def threads(n: int) -> Iterator[None]:
-    """torch and numba with ``n`` threads (at least one) for the duration."""
-    before = torch.get_num_threads(), numba.get_num_threads()
-    set_threads(n)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before[1])
-        torch.set_num_threads(before[0])
 
 
 def start(run) -> None:

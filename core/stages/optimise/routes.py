@@ -31,7 +31,8 @@ import torch
 from ...model.errors import Cancelled
 from ...model.progress import Progress
 from .fit import FitConfig
-from .parallel import POLL, main_hidden, set_threads, threads as parallel_threads
+from ...render.threads import set_threads, threads as parallel_threads
+from .parallel import POLL, main_hidden
 
 #: ``work(name, cfg, progress, closing, span, label)`` -> the route's result (picklable): one
 #: route from the proposals (:func:`.stage._route` with the stage's inputs bound)
@@ -88,7 +89,7 @@ class Forward:
         self.conn.send_bytes(pickle.dumps(("update", (stage, fraction, message, force), figures)))
 
     def log(self, message: str, level: str = "info") -> None:
-        self.conn.send_bytes(pickle.dumps(("log", (message, level))))
+        self.conn.send_bytes(pickle.dumps(("log", (message, level), {})))
 
     def check_cancel(self) -> None:
         """End this process if its parent has gone (else the parent ends it)."""
@@ -98,7 +99,8 @@ class Forward:
 
 def _serve(conn: Connection, threads: int, payload: bytes) -> None:
     """A route process: runs ``work(name, cfg, ...)`` from ``payload`` and sends its result
-    (``("done", result)``) or why it failed (``("failed", why)``)."""
+    (``("done", result, {})``) or why it failed (``("failed", why, {})``); every message is
+    ``(kind, args, figures)``, a plain pickle (tensors by value, as :mod:`.parallel`'s)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)      # the parent cancels and ends it
     try:
         work, name, cfg, span = pickle.loads(payload)
@@ -106,9 +108,9 @@ def _serve(conn: Connection, threads: int, payload: bytes) -> None:
         torch.use_deterministic_algorithms(True, warn_only=True)
         with ExitStack() as closing:
             result = work(name, cfg, Forward(conn), closing, span, name)
-        reply = pickle.dumps(("done", result))
+        reply = pickle.dumps(("done", result, {}))
     except Exception as exc:   # noqa: BLE001 - reported to the parent, which runs it itself
-        reply = pickle.dumps(("failed", f"{type(exc).__name__}: {exc}"))
+        reply = pickle.dumps(("failed", f"{type(exc).__name__}: {exc}", {}))
     conn.send_bytes(reply)
     conn.close()
 
@@ -142,7 +144,7 @@ class RouteProcess:
         """Report the process's messages until its result comes or it ends."""
         while True:
             try:
-                kind, args, *rest = pickle.loads(self.conn.recv_bytes())
+                kind, args, figures = pickle.loads(self.conn.recv_bytes())
             except (EOFError, OSError):
                 return
             if kind in ("done", "failed"):
@@ -150,7 +152,7 @@ class RouteProcess:
                 return
             try:
                 if kind == "update":
-                    self.progress.update(*args, **rest[0])
+                    self.progress.update(*args, **figures)
                 else:
                     self.progress.log(*args)
             except Cancelled:       # the main thread sees the cancel too and ends the process
